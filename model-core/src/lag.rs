@@ -1,0 +1,269 @@
+//! The lag compensator with its free integrator (sec. 4.1.2, eq. 4.5 / 4.7):
+//!
+//! ```text
+//! G_c(s) = Kc (s + z) / ( s (s/p + 1) ),   Kc = 10000, z = 1 rad/s, p = 0.398 rad/s
+//! ```
+//!
+//! # Discretisation: Tustin, no pre-warping
+//! Tustin (`s = 2/T (z-1)/(z+1)`) keeps the direct feed-through of the error, so the loop gets
+//! no sample of delay beyond the ADC/DAC hold, and maps the integrator to the trapezoid rule.
+//! Pre-warping buys nothing: the lag's corner frequencies (0.4 and 1 rad/s) are 1e-5 of the
+//! Nyquist rate, and at the 3000 rad/s crossover Tustin's frequency warp is 0.1 %. ZOH would
+//! add a sample of delay (3.5 deg of phase at crossover).
+//!
+//! # Realisation: parallel form, delta updates, compensated sums
+//! Partial fractions split the compensator into an integrator and a first-order lag:
+//!
+//! ```text
+//! G_c(s) = Kc z / s  +  Kc (p - z) / (s + p)
+//! ```
+//!
+//! Each is discretised by Tustin on its own, with `e_s = e[n] + e[n-1]`:
+//!
+//! ```text
+//! v[n] = v[n-1] + (Kc z T / 2) e_s
+//! w[n] = w[n-1] + b e_s - alpha w[n-1],  alpha = p T / (1 + p T/2),  b = Kc (p - z) (T/2) / (1 + p T/2)
+//! u[n] = v[n] + w[n]
+//! ```
+//!
+//! `alpha` is `1 - a` computed without cancellation (no `exp` is needed: Tustin is rational),
+//! so the lag pole `a = 1 - 7.96e-6` is exact to `f32` relative precision, where a direct form
+//! would round `a` itself to the nearest `f32` (spacing 6e-8, a 0.75 % error on `1 - a`) and
+//! misplace the lag pole and zero. The states `v` and `w` are
+//! [`Accumulator`]s so the per-step increments (often 1e-6 of the state) are not lost to
+//! rounding; see [`crate::sections`]. The test in host-tests compares this against an
+//! independent `f64` direct-form reference for 1e6 steps: DAC codes agree within 1 LSB.
+//!
+//! # Limits and anti-windup
+//! The command passes through [`OutputLimits::apply`] (NaN guard, slew limit, window). When
+//! the command is limited, the integrator takes back the difference (`v += out - raw`): the
+//! state then describes the command actually sent, so the integrator cannot wind up during a
+//! long saturation or a slewing edge, and the output leaves the limit as soon as the error
+//! changes sign (integrator clamping, the back-calculation gain being 1 per sample).
+//!
+//! # Hold and reset
+//! [`LagState::hold`] freezes the states and the command; releasing continues from the same
+//! command (bumpless). [`LagState::reset_to`] loads the states so that the next command equals
+//! a given value with zero error (bumpless hand-over from open loop or from the safe value).
+//!
+//! # Example
+//! ```
+//! use model_core::lag::{LagCompensator, LagConfig, LagState};
+//! let lag = LagCompensator::new(&LagConfig::default()).unwrap();
+//! let mut state = LagState::new(2.0);
+//! let u = lag.update(&mut state, 1e-3); // 1 mV of error
+//! assert!(u > 2.0 && u < 2.001);
+//! ```
+
+use crate::limits::{ConfigError, Flags, OutputLimits, check_period};
+use crate::params;
+use crate::sections::Accumulator;
+
+/// The continuous parameters, the sample period and the limits. Built into a
+/// [`LagCompensator`] by [`LagCompensator::new`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct LagConfig {
+    /// Gain `Kc`.
+    pub kc: f64,
+    /// Lag zero `z`, rad/s.
+    pub zero_rad_s: f64,
+    /// Lag pole `p`, rad/s.
+    pub pole_rad_s: f64,
+    /// Sample period, seconds.
+    pub period_s: f64,
+    /// Output window, volts at the amplifier input.
+    pub min_v: f64,
+    /// Output window, volts at the amplifier input.
+    pub max_v: f64,
+    /// Slew limit at the amplifier input, V/s.
+    pub slew_v_per_s: f64,
+}
+
+impl Default for LagConfig {
+    /// The thesis compensator at 50 kHz with the default window 0..10 V and 150 V/ms.
+    fn default() -> Self {
+        Self {
+            kc: params::LAG_KC,
+            zero_rad_s: params::LAG_ZERO_RAD_S,
+            pole_rad_s: params::LAG_POLE_RAD_S,
+            period_s: 1.0 / params::SAMPLE_RATE_HZ,
+            min_v: params::SAFE_WINDOW_MIN_V,
+            max_v: params::SAFE_WINDOW_MAX_V,
+            slew_v_per_s: params::AMP_SLEW_INPUT_V_PER_S,
+        }
+    }
+}
+
+/// Discrete coefficients and limits: the configuration half. `Copy`, so a new one can be
+/// built outside the interrupt and swapped in whole.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct LagCompensator {
+    /// `Kc z T / 2`.
+    pub int_gain: f32,
+    /// `Kc (p - z) (T/2) / (1 + p T/2)`.
+    pub lag_gain: f32,
+    /// `1 - a = p T / (1 + p T/2)`.
+    pub lag_alpha: f32,
+    /// The last stage.
+    pub limits: OutputLimits,
+}
+
+impl LagCompensator {
+    /// Discretise `config`. Refuses non-finite values, rates outside 10..200 kHz, `Kc` outside
+    /// `(0, 1e6]`, a zero or pole that is not positive or above 1/100 of the sample rate
+    /// (rad/s), and bad limits.
+    pub fn new(config: &LagConfig) -> Result<Self, ConfigError> {
+        let c = config;
+        if !(c.kc.is_finite() && c.zero_rad_s.is_finite() && c.pole_rad_s.is_finite()) {
+            return Err(ConfigError::NotFinite);
+        }
+        let t = check_period(c.period_s)?;
+        let corner_max = 0.01 / t;
+        if !(c.kc > 0.0
+            && c.kc <= params::LAG_KC_MAX
+            && c.zero_rad_s > 0.0
+            && c.zero_rad_s <= corner_max
+            && c.pole_rad_s > 0.0
+            && c.pole_rad_s <= corner_max)
+        {
+            return Err(ConfigError::BadGain);
+        }
+        let limits = OutputLimits::new(c.min_v, c.max_v, c.slew_v_per_s, t)?;
+        let half = 0.5 * t;
+        let den = 1.0 + c.pole_rad_s * half;
+        Ok(Self {
+            int_gain: (c.kc * c.zero_rad_s * half) as f32,
+            lag_gain: (c.kc * (c.pole_rad_s - c.zero_rad_s) * half / den) as f32,
+            lag_alpha: (c.pole_rad_s * t / den) as f32,
+            limits,
+        })
+    }
+
+    /// One sample: error in volts (reference minus measurement) to the command in volts at
+    /// the amplifier input. Never returns a value outside the window or further than the slew
+    /// limit from the previous command; a non-finite error holds the last command.
+    #[inline]
+    pub fn update(&self, state: &mut LagState, error_v: f32) -> f32 {
+        self.update_flags(state, error_v).0
+    }
+
+    /// [`Self::update`], also returning what the limits did.
+    #[inline]
+    pub fn update_flags(&self, state: &mut LagState, error_v: f32) -> (f32, Flags) {
+        if state.held {
+            return (state.last_v, Flags::HELD);
+        }
+        if !error_v.is_finite() {
+            return (state.last_v, Flags::NONFINITE);
+        }
+        let e_sum = error_v + state.e_prev;
+        state.e_prev = error_v;
+        state.integ.add(self.int_gain * e_sum);
+        let w = state.lag.value();
+        state.lag.add(self.lag_gain * e_sum - self.lag_alpha * w);
+        let raw = state.integ.value() + state.lag.value();
+        let (out, flags) = self.limits.apply(state.last_v, raw);
+        if flags.contains(Flags::NONFINITE) {
+            // The states overflowed: restart them from the last safe command.
+            state.reload(state.last_v);
+        } else if out != raw {
+            // Anti-windup: the integrator takes back what the limits removed.
+            state.integ.add(out - raw);
+        }
+        state.last_v = out;
+        (out, flags)
+    }
+}
+
+/// The compensator's history: the state half.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct LagState {
+    integ: Accumulator,
+    lag: Accumulator,
+    e_prev: f32,
+    last_v: f32,
+    held: bool,
+}
+
+impl LagState {
+    /// A state whose command is `output_v` with no error history.
+    pub fn new(output_v: f32) -> Self {
+        let mut s = Self {
+            integ: Accumulator::default(),
+            lag: Accumulator::default(),
+            e_prev: 0.0,
+            last_v: 0.0,
+            held: false,
+        };
+        s.reset_to(output_v);
+        s
+    }
+
+    fn reload(&mut self, output_v: f32) {
+        self.integ.set(output_v);
+        self.lag.set(0.0);
+        self.e_prev = 0.0;
+    }
+
+    /// Bumpless reset: the next command continues from `output_v` (a non-finite value is
+    /// ignored and the present command kept).
+    pub fn reset_to(&mut self, output_v: f32) {
+        let v = if output_v.is_finite() { output_v } else { self.last_v };
+        self.reload(v);
+        self.last_v = v;
+    }
+
+    /// Freeze (`true`) or release (`false`) the compensator; the command stays where it is.
+    pub fn hold(&mut self, on: bool) {
+        self.held = on;
+    }
+
+    /// True while held.
+    pub fn is_held(&self) -> bool {
+        self.held
+    }
+
+    /// The last command, volts.
+    pub fn output_v(&self) -> f32 {
+        self.last_v
+    }
+
+    /// The integrator's part of the command, volts.
+    pub fn integrator_v(&self) -> f32 {
+        self.integ.value()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn refuses_absurd_parameters() {
+        let ok = LagConfig::default();
+        assert!(LagCompensator::new(&ok).is_ok());
+        for bad in [
+            LagConfig { kc: -1.0, ..ok },
+            LagConfig { kc: 1e9, ..ok },
+            LagConfig { kc: f64::NAN, ..ok },
+            LagConfig { pole_rad_s: 0.0, ..ok },
+            LagConfig { zero_rad_s: 1e6, ..ok },
+            LagConfig { period_s: 1e-3, ..ok },
+            LagConfig { min_v: 5.0, max_v: 1.0, ..ok },
+        ] {
+            assert!(LagCompensator::new(&bad).is_err(), "{bad:?}");
+        }
+    }
+
+    #[test]
+    fn hold_and_nan_keep_the_command() {
+        let lag = LagCompensator::new(&LagConfig::default()).unwrap();
+        let mut s = LagState::new(3.0);
+        let u = lag.update(&mut s, 0.01);
+        assert_eq!(lag.update_flags(&mut s, f32::NAN), (u, Flags::NONFINITE));
+        s.hold(true);
+        assert_eq!(lag.update(&mut s, 1.0), u);
+        s.hold(false);
+        assert!(lag.update(&mut s, 0.0) > u);
+    }
+}

@@ -1,0 +1,38 @@
+//! The control maths of the piezo positioning loop, in one `no_std` crate without an
+//! allocator: what the firmware's 50 kHz interrupt runs, what the QEMU smoke runs run, and
+//! what the host tools simulate.
+//!
+//! # The signal chain
+//! ```text
+//!  reference r ──► PreFilter ──► (+)──► LagCompensator ──► OutputLimits ──► DacCode ──► E-505
+//!                                 ▲ -                                                     │
+//!                                 └── AdcCode ◄── E-509 monitor y ◄── P-753 stage ◄───────┘
+//! ```
+//! Units: `u` is volts at the amplifier's control input (-2..12 V; window 0..10 V by default),
+//! `y` is sensor monitor volts (10 V = 12 um). Converter codes follow the DS1103: 16-bit ADC
+//! and 14-bit DAC, both over +-10 V ([`codes`]).
+//!
+//! # What lives where
+//! * [`params`]: every number, with its thesis section or marked as our assumption.
+//! * [`codes`]: `AdcCode`, `DacCode`, volts, sensor scale.
+//! * [`discretize`]: design-time `f64` maths (matrix exponential, delayed ZOH).
+//! * [`sections`]: `f32` building blocks that stay accurate near z = 1.
+//! * [`limits`]: window, slew limit and NaN guard at the last stage.
+//! * [`lag`]: the lag compensator with its free integrator (eq. 4.5).
+//! * [`plant`]: the linear plant of eq. 4.4 as an exact fixed-step simulator.
+//!
+//! Each block keeps its configuration (coefficients, `Copy`) apart from its state, so a new
+//! configuration can be computed outside the interrupt and swapped in whole.
+#![cfg_attr(not(test), no_std)]
+#![forbid(unsafe_code)]
+#![warn(missing_docs)]
+
+pub mod codes;
+pub mod discretize;
+pub mod lag;
+pub mod limits;
+pub mod params;
+pub mod plant;
+pub mod sections;
+
+pub use codes::{AdcCode, DacCode};
