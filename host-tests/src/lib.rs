@@ -1,1 +1,9 @@
-//! host-tests
+//! Host side of the project: independent `f64` reference models, the simulations and
+//! analyses the tests and the `piezo` command line share, and the command line's verbs.
+//!
+//! Every verb of `piezo` is a function here; `src/bin/piezo.rs` only parses arguments.
+//! The control maths itself lives in `model-core`; this crate calls it and checks it.
+
+pub mod loop_cmd;
+pub mod reference;
+pub mod testing;

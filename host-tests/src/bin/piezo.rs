@@ -1,1 +1,30 @@
-fn main() {}
+//! `piezo`: the command line. A thin shell: each verb parses its arguments and calls the
+//! library in `host_tests`.
+use clap::{Parser, Subcommand};
+
+#[derive(Parser)]
+#[command(name = "piezo", version, about = "Models and tools for the P-753 / E-505 / E-509 piezo loop")]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Closed-loop figures of the thesis loop (margins, bandwidth, step response).
+    Loop(host_tests::loop_cmd::LoopArgs),
+}
+
+fn main() -> std::process::ExitCode {
+    let cli = Cli::parse();
+    let result = match cli.command {
+        Command::Loop(a) => host_tests::loop_cmd::run(&a),
+    };
+    match result {
+        Ok(()) => std::process::ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {e:#}");
+            std::process::ExitCode::from(2)
+        }
+    }
+}
