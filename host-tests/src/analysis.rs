@@ -33,8 +33,15 @@ impl LoopSetup {
     pub fn thesis(rate_hz: f64, kc: f64) -> Self {
         let period_s = 1.0 / rate_hz;
         Self {
-            lag: LagConfig { kc, period_s, ..LagConfig::default() },
-            plant: LinearPlantConfig { period_s, ..LinearPlantConfig::default() },
+            lag: LagConfig {
+                kc,
+                period_s,
+                ..LagConfig::default()
+            },
+            plant: LinearPlantConfig {
+                period_s,
+                ..LinearPlantConfig::default()
+            },
         }
     }
 
@@ -82,7 +89,12 @@ fn whole_periods(w: f64, periods: f64) -> usize {
 
 /// Open-loop frequency response `L` at `omega_rad_s`, measured through the quantisers with a
 /// cosine error of `amplitude_v` around the operating point `u0_v`.
-pub fn open_loop_response(setup: &LoopSetup, omega_rad_s: f64, amplitude_v: f64, u0_v: f64) -> Complex64 {
+pub fn open_loop_response(
+    setup: &LoopSetup,
+    omega_rad_s: f64,
+    amplitude_v: f64,
+    u0_v: f64,
+) -> Complex64 {
     let lag = LagCompensator::new(&setup.lag).expect("validated");
     let plant = LinearPlant::new(&setup.plant).expect("validated");
     let mut ls = LagState::new(u0_v as f32);
@@ -108,7 +120,12 @@ pub fn open_loop_response(setup: &LoopSetup, omega_rad_s: f64, amplitude_v: f64,
 }
 
 /// Closed-loop response `Y/R` at `f_hz` with a sine reference of `amplitude_v` around `y0_v`.
-pub fn closed_loop_response(setup: &LoopSetup, f_hz: f64, amplitude_v: f64, y0_v: f64) -> Complex64 {
+pub fn closed_loop_response(
+    setup: &LoopSetup,
+    f_hz: f64,
+    amplitude_v: f64,
+    y0_v: f64,
+) -> Complex64 {
     let mut sim = LoopSim::new(&setup.lag, &setup.plant).expect("validated");
     sim.settle_at(y0_v);
     let w = 2.0 * PI * f_hz * setup.lag.period_s;
@@ -150,7 +167,12 @@ fn bisect_log(mut lo: f64, mut hi: f64, f: impl Fn(f64) -> f64) -> Option<f64> {
 }
 
 /// Step response figures for a step of `step_v` from `y0_v`, simulated for `seconds`.
-pub fn step_figures(setup: &LoopSetup, y0_v: f64, step_v: f64, seconds: f64) -> (f64, f64, Vec<(f64, f64)>) {
+pub fn step_figures(
+    setup: &LoopSetup,
+    y0_v: f64,
+    step_v: f64,
+    seconds: f64,
+) -> (f64, f64, Vec<(f64, f64)>) {
     let mut sim = LoopSim::new(&setup.lag, &setup.plant).expect("validated");
     sim.settle_at(y0_v);
     let t = setup.lag.period_s;

@@ -37,18 +37,57 @@ pub fn run(a: &LoopArgs) -> anyhow::Result<()> {
         return Ok(());
     }
     println!("Thesis loop at {:.0} Hz, Kc = {}", a.rate, a.kc);
-    println!("{:<26}{:>16}{:>16}{:>16}", "figure", "measured", "recomputed", "thesis");
+    println!(
+        "{:<26}{:>16}{:>16}{:>16}",
+        "figure", "measured", "recomputed", "thesis"
+    );
     let rows = [
-        ("gain margin", fmt(f.gain_margin_db, "dB"), params::RECOMPUTED_GAIN_MARGIN_DB, params::THESIS_GAIN_MARGIN_DB, "dB"),
-        ("phase margin", fmt(f.phase_margin_deg, "deg"), params::RECOMPUTED_PHASE_MARGIN_DEG, params::THESIS_PHASE_MARGIN_DEG, "deg"),
-        ("gain crossover", fmt(f.crossover_rad_s, "rad/s"), params::RECOMPUTED_CROSSOVER_RAD_S, 3300.0, "rad/s"),
-        ("closed-loop -3 dB", fmt(f.bandwidth_hz, "Hz"), params::RECOMPUTED_BANDWIDTH_HZ, 950.0, "Hz"),
+        (
+            "gain margin",
+            fmt(f.gain_margin_db, "dB"),
+            params::RECOMPUTED_GAIN_MARGIN_DB,
+            params::THESIS_GAIN_MARGIN_DB,
+            "dB",
+        ),
+        (
+            "phase margin",
+            fmt(f.phase_margin_deg, "deg"),
+            params::RECOMPUTED_PHASE_MARGIN_DEG,
+            params::THESIS_PHASE_MARGIN_DEG,
+            "deg",
+        ),
+        (
+            "gain crossover",
+            fmt(f.crossover_rad_s, "rad/s"),
+            params::RECOMPUTED_CROSSOVER_RAD_S,
+            3300.0,
+            "rad/s",
+        ),
+        (
+            "closed-loop -3 dB",
+            fmt(f.bandwidth_hz, "Hz"),
+            params::RECOMPUTED_BANDWIDTH_HZ,
+            950.0,
+            "Hz",
+        ),
     ];
     for (name, m, r, t, unit) in rows {
-        println!("{name:<26}{m:>16}{:>16}{:>16}", format!("{r} {unit}"), format!("{t} {unit}"));
+        println!(
+            "{name:<26}{m:>16}{:>16}{:>16}",
+            format!("{r} {unit}"),
+            format!("{t} {unit}")
+        );
     }
-    println!("{:<26}{:>16}", "1 V step overshoot", fmt(f.step_overshoot_pct, "%"));
-    println!("{:<26}{:>16}", "settling to 2 %", fmt(f.settling_2pct_ms, "ms"));
+    println!(
+        "{:<26}{:>16}",
+        "1 V step overshoot",
+        fmt(f.step_overshoot_pct, "%")
+    );
+    println!(
+        "{:<26}{:>16}",
+        "settling to 2 %",
+        fmt(f.settling_2pct_ms, "ms")
+    );
     if f.bandwidth_hz.is_none() {
         println!("the closed loop is unstable at this gain: no bandwidth or step response");
     }

@@ -83,7 +83,9 @@ impl LoopSim {
         } else {
             output + noise
         };
-        let u = self.lag.update(&mut self.lag_state, (r_v - measured) as f32);
+        let u = self
+            .lag
+            .update(&mut self.lag_state, (r_v - measured) as f32);
         let dac = DacCode::from_volts(u);
         let applied = if self.quantise { dac.volts() } else { u };
         self.plant.step(&mut self.plant_state, applied);
