@@ -20,6 +20,8 @@
 //! * [`limits`]: window, slew limit and NaN guard at the last stage.
 //! * [`lag`]: the lag compensator with its free integrator (eq. 4.5).
 //! * [`plant`]: the linear plant of eq. 4.4 as an exact fixed-step simulator.
+//! * [`controller`]: the one per-sample function the firmware's interrupt and the QEMU runs
+//!   call: modes, faults, compensator, limits.
 //!
 //! Each block keeps its configuration (coefficients, `Copy`) apart from its state, so a new
 //! configuration can be computed outside the interrupt and swapped in whole.
@@ -28,6 +30,7 @@
 #![warn(missing_docs)]
 
 pub mod codes;
+pub mod controller;
 pub mod discretize;
 pub mod lag;
 pub mod limits;

@@ -90,3 +90,17 @@ pub const RECOMPUTED_PHASE_MARGIN_DEG: f64 = 60.5;
 pub const RECOMPUTED_CROSSOVER_RAD_S: f64 = 3076.0;
 /// Recomputed closed-loop -3 dB bandwidth, Hz.
 pub const RECOMPUTED_BANDWIDTH_HZ: f64 = 1001.0;
+
+// ----- Fault detection in the controller (our assumptions). -----
+/// Lowest plausible sensor reading, volts: the E-509 monitor spans 0..10 V (sec. 2.4); half a
+/// volt below means a broken or disconnected sensor.
+pub const SENSOR_VALID_MIN_V: f64 = -0.5;
+/// Highest plausible sensor reading, volts (over-range above this).
+pub const SENSOR_VALID_MAX_V: f64 = 10.5;
+/// A sensor is stuck if its code does not change at all for this many samples (5 ms at
+/// 50 kHz) while the command moves by more than [`SENSOR_STUCK_COMMAND_V`]. A live E-509 shows
+/// +-2.5 mV of noise, about 8 ADC codes, so a frozen code with a moving command is a fault.
+pub const SENSOR_STUCK_SAMPLES: u32 = 250;
+/// Command movement that must show on the sensor, volts at the amplifier input (moves the
+/// stage by about 80 mV of monitor signal, 260 ADC codes).
+pub const SENSOR_STUCK_COMMAND_V: f64 = 0.1;
