@@ -5,7 +5,13 @@
 //! The control maths itself lives in `model-core`; this crate calls it and checks it.
 
 pub mod analysis;
+pub mod identify;
+pub mod identify_cmd;
 pub mod loop_cmd;
+pub mod model_file;
+pub mod record;
 pub mod reference;
 pub mod sim;
+pub mod simulate;
+pub mod synth;
 pub mod testing;

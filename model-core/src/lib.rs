@@ -22,6 +22,8 @@
 //! * [`plant`]: the linear plant of eq. 4.4 as an exact fixed-step simulator.
 //! * [`controller`]: the one per-sample function the firmware's interrupt and the QEMU runs
 //!   call: modes, faults, compensator, limits.
+//! * [`drift`], [`gain`], [`amplifier`], [`sensor`]: the non-linear blocks of ch. 5.
+//! * [`stage`]: the ch. 6 overall model composed of all blocks (the wiring is stated there).
 //!
 //! Each block keeps its configuration (coefficients, `Copy`) apart from its state, so a new
 //! configuration can be computed outside the interrupt and swapped in whole.
@@ -29,13 +31,18 @@
 #![forbid(unsafe_code)]
 #![warn(missing_docs)]
 
+pub mod amplifier;
 pub mod codes;
 pub mod controller;
 pub mod discretize;
+pub mod drift;
+pub mod gain;
 pub mod lag;
 pub mod limits;
 pub mod params;
 pub mod plant;
 pub mod sections;
+pub mod sensor;
+pub mod stage;
 
 pub use codes::{AdcCode, DacCode};
