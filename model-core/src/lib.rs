@@ -22,6 +22,7 @@
 //! * [`plant`]: the linear plant of eq. 4.4 as an exact fixed-step simulator.
 //! * [`controller`]: the one per-sample function the firmware's interrupt and the QEMU runs
 //!   call: modes, faults, compensator, limits.
+//! * [`hysteresis`]: the static hysteretic map (Everett table) with its turning-point memory.
 //!
 //! Each block keeps its configuration (coefficients, `Copy`) apart from its state, so a new
 //! configuration can be computed outside the interrupt and swapped in whole.
@@ -32,6 +33,7 @@
 pub mod codes;
 pub mod controller;
 pub mod discretize;
+pub mod hysteresis;
 pub mod lag;
 pub mod limits;
 pub mod params;
