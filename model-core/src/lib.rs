@@ -24,6 +24,7 @@
 //!   call: modes, faults, compensator, limits.
 //! * [`drift`], [`gain`], [`amplifier`], [`sensor`]: the non-linear blocks of ch. 5.
 //! * [`stage`]: the ch. 6 overall model composed of all blocks (the wiring is stated there).
+//! * [`hysteresis`]: the static hysteretic map (Everett table) with its turning-point memory.
 //!
 //! Each block keeps its configuration (coefficients, `Copy`) apart from its state, so a new
 //! configuration can be computed outside the interrupt and swapped in whole.
@@ -37,6 +38,7 @@ pub mod controller;
 pub mod discretize;
 pub mod drift;
 pub mod gain;
+pub mod hysteresis;
 pub mod lag;
 pub mod limits;
 pub mod params;
