@@ -4,3 +4,7 @@
 
 pub mod lag;
 pub mod hysteresis_truth;
+pub mod amplifier;
+pub mod drift;
+pub mod gain;
+pub mod stage;
