@@ -46,6 +46,10 @@
 //! poly = [1.0, 0.02, -0.001]
 //! range_v = [0.0, 10.0]
 //!
+//! [hysteresis]                   # effect `hysteresis`: play operators (model_core::play)
+//! radii_v = [0.2, 0.6, 1.5, 3.5]
+//! weights = [0.02, 0.02, 0.03, 0.02]
+//!
 //! [slew-rate-limit]               # effect `slew-rate-limit`, at the amplifier output
 //! output_v_per_s = 1.5e6
 //!
@@ -63,6 +67,7 @@ use model_core::amplifier::AmplifierConfig;
 use model_core::drift::DriftConfig;
 use model_core::gain::FastGainConfig;
 use model_core::params;
+use model_core::play::PlayConfig;
 use model_core::sensor::SensorConfig;
 use model_core::stage::{ModeConfig, Stage, StageConfig};
 use serde::{Deserialize, Serialize};
@@ -158,6 +163,16 @@ pub struct GainSection {
 }
 
 /// `[slew-rate-limit]`.
+/// Effect `hysteresis`: the play-operator sum of [`model_core::play`].
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct HysteresisSection {
+    /// Thresholds, volts.
+    pub radii_v: [f64; params::PLAY_OPERATORS],
+    /// Weights, sensor volts per volt.
+    pub weights: [f64; params::PLAY_OPERATORS],
+}
+
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct SlewSection {
@@ -206,6 +221,8 @@ pub struct ModelFile {
     #[serde(rename = "nonlinear-gain", default, skip_serializing_if = "Option::is_none")]
     pub nonlinear_gain: Option<GainSection>,
     /// `slew-rate-limit`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub hysteresis: Option<HysteresisSection>,
     #[serde(rename = "slew-rate-limit", default, skip_serializing_if = "Option::is_none")]
     pub slew_rate_limit: Option<SlewSection>,
     /// `saturation`.
@@ -295,6 +312,10 @@ impl ModelFile {
                 poly: g.poly,
                 range_v: pair(g.range_v),
             }),
+            hysteresis: c.play.map(|p| HysteresisSection {
+                radii_v: p.radii_v,
+                weights: p.weights,
+            }),
             slew_rate_limit: c.amplifier.slew_v_per_s.map(|s| SlewSection { output_v_per_s: s }),
             saturation: c.amplifier.saturation.then_some(SaturationSection {
                 input_range_v: pair(c.amplifier.input_range_v),
@@ -336,6 +357,10 @@ impl ModelFile {
             second_mode: self.resonance.as_ref().map(|r| ModeConfig {
                 mode_hz: r.mode_hz,
                 damping: r.damping,
+            }),
+            play: self.hysteresis.as_ref().map(|h| PlayConfig {
+                radii_v: h.radii_v,
+                weights: h.weights,
             }),
             delay_s: self.time_delay.as_ref().map_or(0.0, |d| d.delay_s),
             sensor: SensorConfig {

@@ -43,6 +43,7 @@ pub mod lag;
 pub mod limits;
 pub mod params;
 pub mod plant;
+pub mod play;
 pub mod sections;
 pub mod sensor;
 pub mod stage;

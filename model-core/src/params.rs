@@ -152,7 +152,6 @@ pub const MAX_DELAY_S: f64 = 1.0e-3;
 // Stage simulation step.
 /// Fixed step of the stage model (the loop rate, sec. 2.3.1).
 pub const STAGE_PERIOD_S: f64 = 1.0 / SAMPLE_RATE_HZ;
-=======
 // ----- Hysteresis table (sec. 3.2, 5.3; issue #4). -----
 /// Nodes per axis of the Everett grid (turning-up value alpha, turning-down value beta).
 /// The table stores the strictly lower triangle alpha > beta: 45 * 44 / 2 = 990 `f32`, so the
@@ -185,3 +184,14 @@ pub const HYST_DEFAULT_LOOP_WIDTH_FRAC: f64 = 0.185;
 pub const HYST_FORC_STEP_V: f64 = 0.15;
 /// Frequency of the preconditioning sinusoid (sec. 5.3.4).
 pub const HYST_FORC_PRECONDITION_HZ: f64 = 1.0;
+
+// =====================================================================================
+// ----- The model-gap workflow (issue #7): fitted hysteresis form and gap thresholds. -----
+// =====================================================================================
+/// Number of play operators of the fitted hysteresis form [`crate::play`] (our assumption:
+/// four thresholds spread over the 10 V range are enough to bring a 15 % loop to a few mV).
+pub const PLAY_OPERATORS: usize = 4;
+/// Thresholds of the fitted play operators, volts at the amplifier input (our assumption:
+/// roughly geometric over the 0..10 V range, so that small and large loops both have an
+/// operator of their size).
+pub const PLAY_RADII_V: [f64; PLAY_OPERATORS] = [0.2, 0.6, 1.5, 3.5];

@@ -69,6 +69,7 @@ use crate::drift::{Drift, DriftConfig, DriftState};
 use crate::gain::{FastGain, FastGainConfig};
 use crate::limits::{ConfigError, check_period};
 use crate::params;
+use crate::play::{Play, PlayConfig, PlayState};
 use crate::plant::{LinearPlant, LinearPlantConfig, MAX_DELAY_SAMPLES, PlantState, continuous_state_space};
 use crate::sensor::{Sensor, SensorConfig, SensorState};
 use core::f64::consts::PI;
@@ -104,6 +105,9 @@ pub struct StageConfig {
     pub mode: ModeConfig,
     /// A second mode in series (`resonance`).
     pub second_mode: Option<ModeConfig>,
+    /// The fitted play-operator hysteresis of the model-gap workflow (`hysteresis`), added to
+    /// the fast static map before K'(u) ([`crate::play`]).
+    pub play: Option<PlayConfig>,
     /// Pure delay, seconds (`time-delay`; 0 is off).
     pub delay_s: f64,
     /// The sensor monitor and ADC.
@@ -132,6 +136,7 @@ impl StageConfig {
                 damping: params::STAGE_DAMPING,
             },
             second_mode: None,
+            play: None,
             delay_s: params::PLANT_DELAY_S,
             sensor: SensorConfig {
                 noise_v: 0.0,
@@ -268,6 +273,7 @@ pub struct Stage {
     drift: Option<Drift>,
     plant: LinearPlant,
     second_mode: Option<TwoModes>,
+    play: Option<Play>,
     sensor: Sensor,
 }
 
@@ -278,6 +284,7 @@ pub struct StageState {
     drift: DriftState,
     plant: PlantState,
     second_mode: TwoModesState,
+    play: PlayState,
     sensor: SensorState,
     signals: Signals,
 }
@@ -339,6 +346,7 @@ impl Stage {
             drift: cfg.drift.as_ref().map(|d| Drift::new(d, t)).transpose()?,
             plant: LinearPlant::new(&cfg.plant_config())?,
             second_mode: cfg.second_mode.as_ref().map(|m| TwoModes::new(&cfg.plant_config(), m)).transpose()?,
+            play: cfg.play.as_ref().map(Play::new).transpose()?,
             sensor: Sensor::new(&cfg.sensor)?,
         })
     }
@@ -362,7 +370,13 @@ impl Stage {
     /// The fast static map for the amplifier output in control-input volts.
     #[inline]
     fn fast(&self, ue_v: f32) -> f32 {
-        let h = self.static_gain * ue_v;
+        self.fast_with(ue_v, 0.0)
+    }
+
+    /// The fast static map with the hysteretic offset `hyst_v` added before K'(u).
+    #[inline]
+    fn fast_with(&self, ue_v: f32, hyst_v: f32) -> f32 {
+        let h = self.static_gain * ue_v + hyst_v;
         match &self.nonlinear_gain {
             Some(g) => g.gain(ue_v) * h,
             None => h,
@@ -395,6 +409,7 @@ impl Stage {
                 Some(m) => m.steady_state(d),
                 None => TwoModes::idle(),
             },
+            play: self.play.as_ref().map_or(PlayState::default(), |p| p.steady_state(ue)),
             sensor: self.sensor.initial_state(),
             signals: Signals {
                 command_v,
@@ -415,7 +430,11 @@ impl Stage {
         let command_v = self.dac(u_v);
         let amplifier_v = self.amplifier.step(&mut s.amplifier, command_v);
         let ue = amplifier_v * self.inv_nominal_gain;
-        let fast_v = self.fast(ue);
+        let hyst_v = match &self.play {
+            Some(p) => p.step(&mut s.play, ue),
+            None => 0.0,
+        };
+        let fast_v = self.fast_with(ue, hyst_v);
         let drift_v = match &self.drift {
             Some(d) => d.step(&mut s.drift, ue),
             None => 0.0,

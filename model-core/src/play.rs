@@ -1,0 +1,99 @@
+//! A fitted hysteresis form for the model-gap workflow (issue #7): a Prandtl-Ishlinskii sum of
+//! a few play operators added to the fast static map (sec. 5.3; the operator model of the
+//! thesis' future-work list).
+//!
+//! ```text
+//!   z_i[n] = min(max(z_i[n-1], u - r_i), u + r_i)        play operator with threshold r_i
+//!   h(u)   = sum_i w_i (z_i - u)                          sensor volts, added to 0.79 u
+//! ```
+//! Each term `z_i - u` lies in `[-r_i, r_i]`: it is `-r_i` on a rising branch and `+r_i` on a
+//! falling one once the input has moved `2 r_i` past its last reversal, so with `w_i >= 0` the
+//! loop runs counter-clockwise with the output lagging the input, as the stage's does (sec.
+//! 3.2). The map is rate independent and has the wiping-out property (play operators do).
+//!
+//! **Why this form and not the Everett table** ([`crate::hysteresis`]): the model-gap loop fits
+//! the hysteresis from arbitrary records in one linear least-squares solve (the output is
+//! linear in the weights), with four parameters whose meaning is plain, and the state is four
+//! `f32` (so [`crate::stage::StageState`] stays `Copy`). The table is the model for
+//! identification from reversal curves and for inversion; a fitted play sum converts to it
+//! exactly (its Everett function is `sum_i w_i max(a - b - 2 r_i, 0)`), which the lead may
+//! choose to do when the stage takes a table.
+//!
+//! Cost: four clamps per step; no allocation, no panics.
+
+use crate::limits::ConfigError;
+use crate::params::PLAY_OPERATORS;
+
+/// Parameters of the play-operator hysteresis (design time, `f64`).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PlayConfig {
+    /// Thresholds `r_i`, volts (0..10, finite).
+    pub radii_v: [f64; PLAY_OPERATORS],
+    /// Weights `w_i`, sensor volts per volt (each within -1..1).
+    pub weights: [f64; PLAY_OPERATORS],
+}
+
+impl PlayConfig {
+    /// Finite, thresholds within 0..10 V, weights within -1..1.
+    pub fn validate(&self) -> Result<(), ConfigError> {
+        if self.radii_v.iter().chain(&self.weights).any(|v| !v.is_finite()) {
+            return Err(ConfigError::NotFinite);
+        }
+        if self.radii_v.iter().any(|r| !(0.0..=10.0).contains(r)) || self.weights.iter().any(|w| w.abs() > 1.0) {
+            return Err(ConfigError::BadGain);
+        }
+        Ok(())
+    }
+}
+
+/// The play-operator hysteresis, run-time form (`f32`).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Play {
+    radii_v: [f32; PLAY_OPERATORS],
+    weights: [f32; PLAY_OPERATORS],
+}
+
+/// The operators' positions.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct PlayState {
+    z_v: [f32; PLAY_OPERATORS],
+}
+
+impl Play {
+    /// Checks `cfg` and converts it.
+    ///
+    /// ```
+    /// use model_core::play::{Play, PlayConfig};
+    /// let p = Play::new(&PlayConfig { radii_v: [0.5, 1.0, 2.0, 3.0], weights: [0.1, 0.0, 0.0, 0.0] }).unwrap();
+    /// let mut s = p.steady_state(0.0);
+    /// assert!((p.step(&mut s, 5.0) + 0.05).abs() < 1e-6); // rising: -w r
+    /// assert!((p.step(&mut s, 2.0) - 0.05).abs() < 1e-6); // falling: +w r
+    /// ```
+    pub fn new(cfg: &PlayConfig) -> Result<Self, ConfigError> {
+        cfg.validate()?;
+        Ok(Self {
+            radii_v: cfg.radii_v.map(|v| v as f32),
+            weights: cfg.weights.map(|v| v as f32),
+        })
+    }
+
+    /// At rest with `u_v` held for ever (every operator at the input: no hysteretic offset).
+    pub fn steady_state(&self, u_v: f32) -> PlayState {
+        PlayState { z_v: [u_v; PLAY_OPERATORS] }
+    }
+
+    /// Advance with input `u_v` and return `h(u)`, sensor volts. A non-finite input leaves the
+    /// state unchanged and returns 0.
+    #[inline]
+    pub fn step(&self, s: &mut PlayState, u_v: f32) -> f32 {
+        if !u_v.is_finite() {
+            return 0.0;
+        }
+        let mut h = 0.0;
+        for ((z, r), w) in s.z_v.iter_mut().zip(&self.radii_v).zip(&self.weights) {
+            *z = z.max(u_v - r).min(u_v + r);
+            h += w * (*z - u_v);
+        }
+        h
+    }
+}
