@@ -5,9 +5,13 @@
 //! The control maths itself lives in `model-core`; this crate calls it and checks it.
 
 pub mod analysis;
+pub mod demo;
+pub mod gap;
+pub mod gap_cmd;
 pub mod identify;
 pub mod identify_cmd;
 pub mod loop_cmd;
+pub mod mat;
 pub mod model_file;
 pub mod record;
 pub mod reference;

@@ -23,6 +23,10 @@ enum Command {
     Synth(host_tests::synth::SynthArgs),
     /// Identify drift or hysteresis from a record and write a model file.
     Identify(host_tests::identify_cmd::IdentifyArgs),
+    /// Name the effects a model lacks from measured records, add them, show the gap shrink.
+    Gap(host_tests::gap_cmd::GapArgs),
+    /// The model-gap workflow on records synthesised from a virtual stage (no board needed).
+    Demo(host_tests::demo::DemoArgs),
 }
 
 fn main() -> std::process::ExitCode {
@@ -32,6 +36,8 @@ fn main() -> std::process::ExitCode {
         Command::Simulate(a) => host_tests::simulate::run(&a),
         Command::Synth(a) => host_tests::synth::run(&a),
         Command::Identify(a) => host_tests::identify_cmd::run(&a),
+        Command::Gap(a) => host_tests::gap_cmd::run(&a),
+        Command::Demo(a) => host_tests::demo::run(&a),
     };
     match result {
         Ok(()) => std::process::ExitCode::SUCCESS,

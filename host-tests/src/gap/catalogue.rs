@@ -1,0 +1,235 @@
+//! The catalogue of candidate effects (issue #7): for each, its name, how it sits in the model
+//! file, its parameters and bounds, its signature check and its fit.
+//!
+//! Two kinds of fit, chosen by where the effect shows:
+//! * **fast effects** (`time-delay`, `amplifier-pole`, `resonance`, `slew-rate-limit`,
+//!   `saturation`) change the response within milliseconds of an edge. Their parameters enter
+//!   the dynamics non-linearly, so they are fitted by a bounded search (coarse grid, then a
+//!   golden-section refinement) that simulates the fast records (50 kHz, short: cheap) with the
+//!   whole current model plus the candidate;
+//! * **slow effects** (`drift`, `hysteresis`, `nonlinear-gain`) add a term to the quasi-static
+//!   displacement that is linear in their weights given a few shape constants (drift time
+//!   constants, play thresholds). They are fitted together, by one weighted least-squares
+//!   solve on the settled samples of all records (time constants chosen from a log grid by the
+//!   same solve), so an effect already in the model is refitted with the new one.
+//!
+//! Every candidate is then checked the same way: the whole augmented model is simulated on
+//! every record by [`model_core::stage::Stage`] (never by a second simulator) and scored.
+
+use crate::model_file::{
+    DelaySection, DriftSection, GainSection, HysteresisSection, ModelFile, PoleSection, ResonanceSection,
+    SaturationSection, SlewSection,
+};
+use model_core::params;
+
+/// The catalogued effects, in the order the tables list them (the names are a contract).
+pub const EFFECTS: [&str; 8] = [
+    "time-delay",
+    "amplifier-pole",
+    "resonance",
+    "drift",
+    "hysteresis",
+    "nonlinear-gain",
+    "slew-rate-limit",
+    "saturation",
+];
+
+/// The slow effects (fitted by least squares).
+pub const SLOW: [&str; 3] = ["drift", "hysteresis", "nonlinear-gain"];
+
+/// The fast effects (fitted by a bounded search on the fast records).
+pub const FAST: [&str; 5] = ["time-delay", "amplifier-pole", "resonance", "slew-rate-limit", "saturation"];
+
+/// Drift time constants the fit chooses three from, seconds (log grid, 5 ms..200 s; our
+/// assumption: covers the thesis' 0.06, 0.75 and 12 s and the hour-long creep's first minutes).
+pub const DRIFT_TAU_GRID_S: [f64; 14] = [
+    0.005, 0.01, 0.02, 0.05, 0.1, 0.2, 0.5, 1.0, 2.0, 5.0, 10.0, 20.0, 50.0, 200.0,
+];
+
+/// Is `effect` present in `m`?
+pub fn present(m: &ModelFile, effect: &str) -> bool {
+    match effect {
+        "time-delay" => m.time_delay.is_some(),
+        "amplifier-pole" => m.amplifier_pole.is_some(),
+        "resonance" => m.resonance.is_some(),
+        "drift" => m.drift.is_some(),
+        "hysteresis" => m.hysteresis.is_some(),
+        "nonlinear-gain" => m.nonlinear_gain.is_some(),
+        "slew-rate-limit" => m.slew_rate_limit.is_some(),
+        "saturation" => m.saturation.is_some(),
+        _ => false,
+    }
+}
+
+/// Number of fitted parameters of `effect` (for the evidence penalty).
+pub fn param_count(effect: &str) -> usize {
+    match effect {
+        "resonance" => 2,
+        "drift" => 6,
+        "hysteresis" => params::PLAY_OPERATORS,
+        "nonlinear-gain" => 2,
+        _ => 1,
+    }
+}
+
+/// `m` without the slow effects.
+pub fn without_slow(m: &ModelFile) -> ModelFile {
+    let mut m = m.clone();
+    m.drift = None;
+    m.hysteresis = None;
+    m.nonlinear_gain = None;
+    m
+}
+
+/// `m` without `effect`.
+pub fn without(m: &ModelFile, effect: &str) -> ModelFile {
+    let mut m = m.clone();
+    match effect {
+        "time-delay" => m.time_delay = None,
+        "amplifier-pole" => m.amplifier_pole = None,
+        "resonance" => m.resonance = None,
+        "drift" => m.drift = None,
+        "hysteresis" => m.hysteresis = None,
+        "nonlinear-gain" => m.nonlinear_gain = None,
+        "slew-rate-limit" => m.slew_rate_limit = None,
+        "saturation" => m.saturation = None,
+        _ => {}
+    }
+    m
+}
+
+/// The parameters of `effect` in `m`, as (name, value) pairs for tables and JSON.
+pub fn params_of(m: &ModelFile, effect: &str) -> Vec<(String, f64)> {
+    let one = |k: &str, v: f64| vec![(k.to_string(), v)];
+    match effect {
+        "time-delay" => m.time_delay.as_ref().map_or(vec![], |d| one("delay_s", d.delay_s)),
+        "amplifier-pole" => m.amplifier_pole.as_ref().map_or(vec![], |p| one("pole_hz", p.pole_hz)),
+        "resonance" => m
+            .resonance
+            .as_ref()
+            .map_or(vec![], |r| vec![("mode_hz".into(), r.mode_hz), ("damping".into(), r.damping)]),
+        "drift" => m.drift.as_ref().map_or(vec![], |d| {
+            let mut v = Vec::new();
+            for i in 0..3 {
+                v.push((format!("gain{}", i + 1), d.gains[i]));
+                v.push((format!("tau{}_s", i + 1), d.taus_s[i]));
+            }
+            v
+        }),
+        "hysteresis" => m.hysteresis.as_ref().map_or(vec![], |h| {
+            h.radii_v
+                .iter()
+                .zip(&h.weights)
+                .map(|(r, w)| (format!("w_r{r}v"), *w))
+                .collect()
+        }),
+        "nonlinear-gain" => m
+            .nonlinear_gain
+            .as_ref()
+            .map_or(vec![], |g| vec![("c1_per_v".into(), g.poly[1]), ("c2_per_v2".into(), g.poly[2])]),
+        "slew-rate-limit" => m
+            .slew_rate_limit
+            .as_ref()
+            .map_or(vec![], |s| one("output_v_per_s", s.output_v_per_s)),
+        "saturation" => m
+            .saturation
+            .as_ref()
+            .map_or(vec![], |s| one("output_max_v", s.output_range_v[1])),
+        _ => vec![],
+    }
+}
+
+/// A one- or two-parameter fast effect: its bounds and how a value goes into the model.
+pub struct FastSpec {
+    /// Effect name.
+    pub effect: &'static str,
+    /// Bounds of the (first) parameter.
+    pub lo: f64,
+    /// Upper bound.
+    pub hi: f64,
+    /// Search on a log scale.
+    pub log: bool,
+}
+
+/// The search spaces of the fast effects (bounds: what the stage and the model file accept
+/// and what is physically plausible; our assumptions).
+pub fn fast_spec(effect: &str) -> Option<FastSpec> {
+    let s = |effect, lo, hi, log| Some(FastSpec { effect, lo, hi, log });
+    match effect {
+        "time-delay" => s("time-delay", 0.0, params::MAX_DELAY_S, false),
+        "amplifier-pole" => s("amplifier-pole", 200.0, 20_000.0, true),
+        "resonance" => s("resonance", 1_000.0, 20_000.0, true),
+        "slew-rate-limit" => s("slew-rate-limit", 1.5e4, 1.5e6, true),
+        "saturation" => s("saturation", 10.0, params::AMP_OUTPUT_MAX_V, false),
+        _ => None,
+    }
+}
+
+/// `m` with the fast effect set to `x` (and `x2`, the resonance's damping).
+pub fn with_fast(m: &ModelFile, effect: &str, x: f64, x2: f64) -> ModelFile {
+    let mut m = m.clone();
+    match effect {
+        "time-delay" => m.time_delay = Some(DelaySection { delay_s: x }),
+        "amplifier-pole" => m.amplifier_pole = Some(PoleSection { pole_hz: x }),
+        "resonance" => m.resonance = Some(ResonanceSection { mode_hz: x, damping: x2 }),
+        "slew-rate-limit" => m.slew_rate_limit = Some(SlewSection { output_v_per_s: x }),
+        "saturation" => {
+            m.saturation = Some(SaturationSection {
+                input_range_v: [params::AMP_INPUT_MIN_V, params::AMP_INPUT_MAX_V],
+                output_range_v: [params::AMP_OUTPUT_MIN_V, x],
+            })
+        }
+        _ => {}
+    }
+    m
+}
+
+/// The current value of a fast effect in `m` (the search's starting point), if present.
+pub fn fast_value(m: &ModelFile, effect: &str) -> Option<(f64, f64)> {
+    match effect {
+        "time-delay" => m.time_delay.as_ref().map(|d| (d.delay_s, 0.0)),
+        "amplifier-pole" => m.amplifier_pole.as_ref().map(|p| (p.pole_hz, 0.0)),
+        "resonance" => m.resonance.as_ref().map(|r| (r.mode_hz, r.damping)),
+        "slew-rate-limit" => m.slew_rate_limit.as_ref().map(|s| (s.output_v_per_s, 0.0)),
+        "saturation" => m.saturation.as_ref().map(|s| (s.output_range_v[1], 0.0)),
+        _ => None,
+    }
+}
+
+/// Slow-effect parameters from the least-squares solve.
+#[derive(Clone, Debug, Default)]
+pub struct SlowParams {
+    /// Drift: (gains, taus).
+    pub drift: Option<([f64; 3], [f64; 3])>,
+    /// Play weights.
+    pub hysteresis: Option<[f64; params::PLAY_OPERATORS]>,
+    /// K'(u) = 1 + c1 u + c2 u^2.
+    pub gain: Option<(f64, f64)>,
+}
+
+/// `m` (without its slow effects) with the slow effects `p`; `u_range` is the inputs' span
+/// (the range of K(u) and K'(u)). `None` if the parameters are outside what the stage accepts.
+pub fn with_slow(m: &ModelFile, p: &SlowParams, u_range: (f64, f64)) -> Option<ModelFile> {
+    let mut m = without_slow(m);
+    if let Some((gains, taus)) = p.drift {
+        m.drift = Some(DriftSection {
+            gains,
+            taus_s: taus,
+            poly: [1.0, 0.0, 0.0, 0.0],
+            poly_range_v: [u_range.0, u_range.1],
+        });
+    }
+    if let Some(w) = p.hysteresis {
+        m.hysteresis = Some(HysteresisSection {
+            radii_v: params::PLAY_RADII_V,
+            weights: w,
+        });
+    }
+    if let Some((c1, c2)) = p.gain {
+        m.nonlinear_gain = Some(GainSection {
+            poly: [1.0, c1, c2],
+            range_v: [u_range.0, u_range.1],
+        });
+    }
+    m.build_stage().ok().map(|_| m)
+}

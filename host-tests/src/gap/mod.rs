@@ -1,0 +1,801 @@
+//! The model-gap workflow (issue #7): find where simulation and measurement disagree, name the
+//! missing effect, add it with fitted parameters, show the gap shrink, repeat.
+//!
+//! # The loop
+//! 1. **Simulate** every record with the current model ([`model_core::stage::Stage`] at the
+//!    model's own fixed step, the record's input held between samples: [`crate::simulate`]),
+//!    without sensor noise, and take the residual `y_measured - y_simulated`.
+//! 2. **Noise floor** of each record, from the data alone: the median absolute second
+//!    difference of `y` (robust to the few edges; `1.4826 MAD / sqrt(6)` is the standard
+//!    deviation of white noise), on the samples at least 10 ms after the last input change
+//!    when there are enough of them (so ringing after edges does not count as noise).
+//! 3. **Localise** the disagreement: in time (after edges, during holds, during slow cycles)
+//!    and in frequency (the residual spectrum of the fast records, rustfft). These are the
+//!    signature checks and the evidence printed for each effect ([`signatures`]).
+//! 4. **Candidates**: every catalogued effect ([`catalogue`]) not yet in the model is fitted
+//!    (bounded), every effect already in it is refitted, never added twice.
+//! 5. **Select by evidence**: each candidate model is simulated on every record; its score is
+//!    the change of a per-record Gaussian log-likelihood with the BIC penalty,
+//!    `sum_r n_r ln(MSE'_r / MSE_r) + k ln N` (the records have their own residual variance, so
+//!    a short fast record is not drowned by a long slow one). A candidate is admissible if it
+//!    explains at least [`MIN_EXPLAINED`] of the residual power still above the noise floor
+//!    and its signature check passes; the admissible candidate with the lowest score is added.
+//! 6. **Stop** when every record's residual RMS is within [`STOP_FLOOR_RATIO`] of its noise
+//!    floor or no candidate is admissible.
+//!
+//! # What it trades
+//! The slow effects are fitted by a linear solve on settled samples, the fast ones by a
+//! bounded one- or two-dimensional search on the fast records; only the few candidates are
+//! simulated in full. Greedy selection can in principle miss a pair whose members only help
+//! together; refitting every present slow effect with each new one limits that.
+
+pub mod catalogue;
+pub mod protocol;
+pub mod report;
+pub mod signatures;
+
+use crate::model_file::ModelFile;
+use crate::record::Record;
+use crate::simulate::simulate;
+use anyhow::{Context, bail, ensure};
+use catalogue::{EFFECTS, FAST, SLOW, SlowParams};
+use model_core::params;
+use nalgebra::{DMatrix, DVector};
+
+/// Fraction of the residual power above the noise floor a candidate must explain to be added
+/// (our assumption, calibrated on the hidden-effect tests).
+pub const MIN_EXPLAINED: f64 = 0.5;
+/// Stop when every record's residual RMS is within this factor of its noise floor.
+pub const STOP_FLOOR_RATIO: f64 = 1.15;
+/// At most this many steps.
+pub const MAX_STEPS: usize = 8;
+/// Fewest samples a record must have to show anything.
+pub const MIN_SAMPLES: usize = 200;
+/// Records at or above this rate are "fast" (edges resolved), volts... Hz.
+pub const FAST_RATE_HZ: f64 = 5_000.0;
+/// Samples within this time after an input jump are not used by the slow-effect solve.
+pub const SETTLE_S: f64 = 5e-3;
+
+/// One measured record ready for the workflow.
+#[derive(Clone, Debug)]
+pub struct Data {
+    /// Name (file name) for tables and the report.
+    pub name: String,
+    /// Sample times, seconds (uniform).
+    pub t_s: Vec<f64>,
+    /// Amplifier input, volts.
+    pub u_v: Vec<f64>,
+    /// Sensor monitor, volts.
+    pub y_v: Vec<f64>,
+}
+
+impl Data {
+    /// From a parsed record: `y` required, at least [`MIN_SAMPLES`] samples, an input that
+    /// moves.
+    pub fn from_record(name: &str, rec: Record) -> anyhow::Result<Self> {
+        let y = rec.require_y().with_context(|| format!("record {name}"))?.to_vec();
+        let n = rec.len();
+        ensure!(
+            n >= MIN_SAMPLES,
+            "record {name}: {n} samples is too short to show anything (at least {MIN_SAMPLES} are needed)"
+        );
+        let (lo, hi) = min_max(&rec.u_v);
+        ensure!(hi - lo > 0.05, "record {name}: the input u never moves (span {:.3} V): nothing to compare", hi - lo);
+        Ok(Self {
+            name: name.to_string(),
+            t_s: rec.t_s,
+            u_v: rec.u_v,
+            y_v: y,
+        })
+    }
+
+    /// Sampling period, seconds.
+    pub fn period_s(&self) -> f64 {
+        let n = self.t_s.len();
+        (self.t_s[n - 1] - self.t_s[0]) / (n - 1) as f64
+    }
+
+    /// Is this a fast record (edges resolved)?
+    pub fn is_fast(&self) -> bool {
+        1.0 / self.period_s() >= FAST_RATE_HZ
+    }
+
+    /// Number of samples.
+    pub fn len(&self) -> usize {
+        self.t_s.len()
+    }
+
+    /// Never empty (checked on construction).
+    pub fn is_empty(&self) -> bool {
+        self.t_s.is_empty()
+    }
+}
+
+/// One step of the workflow: the effect added or refitted.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct Step {
+    /// Effect name (one of [`EFFECTS`]).
+    pub effect: String,
+    /// Evidence in words.
+    pub evidence: String,
+    /// Fitted parameters.
+    pub params: serde_json::Map<String, serde_json::Value>,
+    /// Residual RMS before the step, volts (root of the mean over records of the mean square).
+    pub rms_before_v: f64,
+    /// Residual RMS after the step, volts.
+    pub rms_after_v: f64,
+    /// Residual RMS of each record before, volts.
+    #[serde(skip)]
+    pub record_rms_before_v: Vec<f64>,
+    /// Residual RMS of each record after, volts.
+    #[serde(skip)]
+    pub record_rms_after_v: Vec<f64>,
+    /// Simulated outputs after the step, one per record.
+    #[serde(skip)]
+    pub sims: Vec<Vec<f64>>,
+    /// Refit of an effect already in the model.
+    #[serde(skip)]
+    pub refit: bool,
+}
+
+/// The outcome of the workflow.
+#[derive(Clone, Debug)]
+pub struct Diagnosis {
+    /// Effects named (added, or refitted with a significant gain), in order.
+    pub named: Vec<String>,
+    /// The steps.
+    pub steps: Vec<Step>,
+    /// Noise floor of each record, volts.
+    pub record_noise_v: Vec<f64>,
+    /// Noise floor, volts (root of the mean of the records' variances).
+    pub noise_floor_v: f64,
+    /// Residual RMS of the final model, volts.
+    pub final_rms_v: f64,
+    /// The base model's simulated outputs.
+    pub base_sims: Vec<Vec<f64>>,
+    /// The augmented model.
+    pub model: ModelFile,
+    /// Candidates tried at each step: (effect, score, explained fraction, admissible).
+    pub tried: Vec<Vec<(String, f64, f64, bool)>>,
+    /// Signature checks of the base model's residual.
+    pub signatures: signatures::Signatures,
+}
+
+impl Diagnosis {
+    /// The JSON object of `piezo gap --json`.
+    pub fn to_json(&self) -> serde_json::Value {
+        serde_json::json!({
+            "named": self.named,
+            "steps": self.steps.iter().map(|s| serde_json::json!({
+                "effect": s.effect,
+                "evidence": s.evidence,
+                "params": s.params,
+                "rms_before_v": s.rms_before_v,
+                "rms_after_v": s.rms_after_v,
+            })).collect::<Vec<_>>(),
+            "noise_floor_v": self.noise_floor_v,
+            "final_rms_v": self.final_rms_v,
+        })
+    }
+
+    /// The terminal table.
+    pub fn table(&self) -> String {
+        let mut s = String::new();
+        s.push_str(&format!(
+            "{:<4} {:<16} {:>12} {:>12}  {:<40} {}\n",
+            "step", "effect", "rms before", "rms after", "fitted parameters", "evidence"
+        ));
+        for (i, st) in self.steps.iter().enumerate() {
+            let p: Vec<String> = st.params.iter().map(|(k, v)| format!("{k}={}", fmt_num(v.as_f64().unwrap_or(f64::NAN)))).collect();
+            s.push_str(&format!(
+                "{:<4} {:<16} {:>9.2} mV {:>9.2} mV  {:<40} {}\n",
+                i + 1,
+                format!("{}{}", st.effect, if st.refit { " (refit)" } else { "" }),
+                1e3 * st.rms_before_v,
+                1e3 * st.rms_after_v,
+                p.join(" "),
+                st.evidence
+            ));
+        }
+        s.push_str(&format!(
+            "named: [{}]; noise floor {:.2} mV; final residual {:.2} mV ({:.2}x the floor)\n",
+            self.named.join(", "),
+            1e3 * self.noise_floor_v,
+            1e3 * self.final_rms_v,
+            self.final_rms_v / self.noise_floor_v.max(1e-12)
+        ));
+        s
+    }
+}
+
+fn fmt_num(v: f64) -> String {
+    let a = v.abs();
+    if a != 0.0 && !(1e-2..1e4).contains(&a) { format!("{v:.3e}") } else { format!("{v:.4}") }
+}
+
+/// Smallest and largest value.
+pub fn min_max(v: &[f64]) -> (f64, f64) {
+    v.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &x| (a.min(x), b.max(x)))
+}
+
+/// Mean square of `a - b`.
+pub fn mse(a: &[f64], b: &[f64]) -> f64 {
+    let n = a.len().min(b.len()).max(1);
+    a.iter().zip(b).map(|(x, y)| (x - y) * (x - y)).sum::<f64>() / n as f64
+}
+
+/// Noise floor of a record, volts: robust standard deviation of its second differences.
+pub fn noise_floor(d: &Data) -> f64 {
+    let n = d.len();
+    let settle = (0.01 / d.period_s()).ceil() as usize;
+    let mut since = vec![usize::MAX; n];
+    let mut last_change: Option<usize> = None;
+    for i in 0..n {
+        if i > 0 && (d.u_v[i] - d.u_v[i - 1]).abs() > 1e-9 {
+            last_change = Some(i);
+        }
+        since[i] = last_change.map_or(usize::MAX, |c| i - c);
+    }
+    let second = |quiet: bool| -> Vec<f64> {
+        (2..n)
+            .filter(|&i| !quiet || since[i - 2] >= settle)
+            .map(|i| (d.y_v[i] - 2.0 * d.y_v[i - 1] + d.y_v[i - 2]).abs())
+            .collect()
+    };
+    let mut v = second(true);
+    if v.len() < 100 {
+        v = second(false);
+    }
+    1.4826 * median(&mut v) / 6f64.sqrt()
+}
+
+/// The median (reorders `v`); 0 for an empty slice.
+pub fn median_pub(v: &mut [f64]) -> f64 {
+    median(v)
+}
+
+fn median(v: &mut [f64]) -> f64 {
+    if v.is_empty() {
+        return 0.0;
+    }
+    let m = v.len() / 2;
+    v.select_nth_unstable_by(m, |a, b| a.total_cmp(b));
+    v[m]
+}
+
+/// Simulate `model` (without sensor noise) on a record.
+pub fn sim(model: &ModelFile, d: &Data) -> anyhow::Result<Vec<f64>> {
+    let mut m = model.clone();
+    m.converters.noise_v = 0.0;
+    let stage = m.build_stage()?;
+    Ok(simulate(&stage, m.period_s, &d.t_s, &d.u_v))
+}
+
+/// Apply `f` to every item on all cores (`std::thread::scope`), keeping the order.
+pub fn par_map<T: Sync, R: Send>(items: &[T], f: impl Fn(&T) -> R + Sync) -> Vec<R> {
+    let threads = std::thread::available_parallelism().map_or(1, |n| n.get()).min(items.len()).max(1);
+    if threads == 1 {
+        return items.iter().map(&f).collect();
+    }
+    let next = std::sync::atomic::AtomicUsize::new(0);
+    let mut out: Vec<Option<R>> = (0..items.len()).map(|_| None).collect();
+    let results = std::sync::Mutex::new(Vec::new());
+    std::thread::scope(|s| {
+        for _ in 0..threads {
+            s.spawn(|| {
+                loop {
+                    let i = next.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+                    let Some(item) = items.get(i) else { break };
+                    let r = f(item);
+                    if let Ok(mut v) = results.lock() {
+                        v.push((i, r));
+                    }
+                }
+            });
+        }
+    });
+    for (i, r) in results.into_inner().unwrap_or_default() {
+        if let Some(slot) = out.get_mut(i) {
+            *slot = Some(r);
+        }
+    }
+    out.into_iter().flatten().collect()
+}
+
+/// Options of the workflow.
+#[derive(Clone, Debug, Default)]
+pub struct Options {
+    /// Show a progress bar on stderr.
+    pub progress: bool,
+}
+
+/// A fitted candidate, scored.
+#[derive(Clone, Debug)]
+struct Candidate {
+    effect: String,
+    refit: bool,
+    model: ModelFile,
+    k: usize,
+    sims: Vec<Vec<f64>>,
+    mse: Vec<f64>,
+}
+
+/// Run the workflow from `base` on `data`.
+pub fn diagnose(base: &ModelFile, data: &[Data], opts: &Options) -> anyhow::Result<Diagnosis> {
+    ensure!(!data.is_empty(), "no records given");
+    base.build_stage().context("base model")?;
+    ensure!(
+        base.period_s <= 20e-6 + 1e-12,
+        "the model's step {} s is longer than 20 us: the workflow simulates at 50 kHz or faster",
+        base.period_s
+    );
+    let bar = if opts.progress {
+        let b = indicatif::ProgressBar::new((MAX_STEPS + 1) as u64);
+        b.set_style(
+            indicatif::ProgressStyle::with_template("{spinner} [{elapsed_precise}] {bar:30} {pos}/{len} {msg}")
+                .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
+        );
+        b.set_message("simulating the base model");
+        Some(b)
+    } else {
+        None
+    };
+    let noise: Vec<f64> = data.iter().map(noise_floor).collect();
+    let var: Vec<f64> = noise.iter().map(|s| (s * s).max(1e-14)).collect();
+    let noise_floor_v = (var.iter().sum::<f64>() / var.len() as f64).sqrt();
+    let (ulo, uhi) = data.iter().fold((0.0f64, 0.0f64), |(a, b), d| {
+        let (l, h) = min_max(&d.u_v);
+        (a.min(l), b.max(h))
+    });
+    let u_range = (ulo.max(-20.0), uhi.min(20.0).max(ulo + 1.0));
+    let n_total: usize = data.iter().map(|d| d.len()).sum();
+
+    let mut model = base.clone();
+    let base_sims: Vec<Vec<f64>> = par_map(data, |d| sim(&model, d)).into_iter().collect::<anyhow::Result<_>>()?;
+    let mut sims = base_sims.clone();
+    let mut cur_mse: Vec<f64> = data.iter().zip(&sims).map(|(d, s)| mse(&d.y_v, s)).collect();
+    let base_sigs = signatures::compute(data, &sims, &noise);
+    let slow_x = slow_regressors(data);
+    let mut steps: Vec<Step> = Vec::new();
+    let mut named: Vec<String> = Vec::new();
+    let mut tried = Vec::new();
+
+    for _ in 0..MAX_STEPS {
+        if let Some(b) = &bar {
+            b.inc(1);
+        }
+        let at_floor = cur_mse.iter().zip(&var).all(|(m, v)| *m <= STOP_FLOOR_RATIO * STOP_FLOOR_RATIO * v);
+        if at_floor {
+            break;
+        }
+        let sigs = signatures::compute(data, &sims, &noise);
+        if let Some(b) = &bar {
+            b.set_message(format!("step {}: fitting {} candidates", steps.len() + 1, EFFECTS.len()));
+        }
+        let cands = candidates(&model, data, &slow_x, &cur_mse, u_range)?;
+        let excess = |m: &[f64]| m.iter().zip(&var).map(|(a, v)| (a - v).max(0.0)).sum::<f64>();
+        let ex0 = excess(&cur_mse);
+        let mut scored = Vec::new();
+        for c in cands {
+            let score: f64 = data
+                .iter()
+                .zip(c.mse.iter().zip(&cur_mse))
+                .map(|(d, (new, old))| d.len() as f64 * (new.max(1e-14) / old.max(1e-14)).ln())
+                .sum::<f64>()
+                + c.k as f64 * (n_total as f64).ln();
+            let explained = if ex0 > 0.0 { 1.0 - excess(&c.mse) / ex0 } else { 0.0 };
+            let sig_ok = sigs.supports(&c.effect);
+            let ok = score < 0.0 && explained >= MIN_EXPLAINED && sig_ok;
+            scored.push((c, score, explained, ok));
+        }
+        tried.push(scored.iter().map(|(c, s, e, ok)| (c.effect.clone(), *s, *e, *ok)).collect());
+        let Some((best, score, explained, _)) = scored
+            .into_iter()
+            .filter(|x| x.3)
+            .min_by(|a, b| a.1.total_cmp(&b.1))
+        else {
+            break;
+        };
+        let rms_before = (cur_mse.iter().sum::<f64>() / cur_mse.len() as f64).sqrt();
+        let rms_after = (best.mse.iter().sum::<f64>() / best.mse.len() as f64).sqrt();
+        let p = catalogue::params_of(&best.model, &best.effect);
+        let mut params = serde_json::Map::new();
+        for (k, v) in &p {
+            params.insert(k.clone(), serde_json::json!(v));
+        }
+        let evidence = format!(
+            "{}; explains {:.0} % of the residual power above the noise floor; score {:.0} (BIC, {} parameter{})",
+            sigs.describe(&best.effect),
+            100.0 * explained,
+            score,
+            best.k,
+            if best.k == 1 { "" } else { "s" }
+        );
+        steps.push(Step {
+            effect: best.effect.clone(),
+            evidence,
+            params,
+            rms_before_v: rms_before,
+            rms_after_v: rms_after,
+            record_rms_before_v: cur_mse.iter().map(|m| m.sqrt()).collect(),
+            record_rms_after_v: best.mse.iter().map(|m| m.sqrt()).collect(),
+            sims: best.sims.clone(),
+            refit: best.refit,
+        });
+        if !named.contains(&best.effect) {
+            named.push(best.effect.clone());
+        }
+        model = best.model;
+        sims = best.sims;
+        cur_mse = best.mse;
+    }
+    if let Some(b) = &bar {
+        b.finish_and_clear();
+    }
+    let final_rms_v = (cur_mse.iter().sum::<f64>() / cur_mse.len() as f64).sqrt();
+    Ok(Diagnosis {
+        named,
+        steps,
+        record_noise_v: noise,
+        noise_floor_v,
+        final_rms_v,
+        base_sims,
+        model,
+        tried,
+        signatures: base_sigs,
+    })
+}
+
+/// Fit every candidate and simulate it on every record.
+fn candidates(
+    model: &ModelFile,
+    data: &[Data],
+    slow_x: &SlowRegressors,
+    cur_mse: &[f64],
+    u_range: (f64, f64),
+) -> anyhow::Result<Vec<Candidate>> {
+    // Slow effects: one joint solve per candidate set.
+    let present_slow: Vec<&str> = SLOW.iter().copied().filter(|e| catalogue::present(model, e)).collect();
+    let base0 = catalogue::without_slow(model);
+    let y0: Vec<Vec<f64>> = par_map(data, |d| sim(&base0, d)).into_iter().collect::<anyhow::Result<_>>()?;
+    let mut jobs: Vec<(String, bool, ModelFile)> = Vec::new();
+    let mut sets: Vec<(String, bool, Vec<&str>)> = SLOW
+        .iter()
+        .filter(|e| !present_slow.contains(e))
+        .map(|e| {
+            let mut s = present_slow.clone();
+            s.push(e);
+            (e.to_string(), false, s)
+        })
+        .collect();
+    for e in &present_slow {
+        sets.push((e.to_string(), true, present_slow.clone()));
+    }
+    let mut refit_done: Option<ModelFile> = None;
+    for (effect, refit, set) in sets {
+        if refit {
+            if let Some(m) = &refit_done {
+                jobs.push((effect, true, m.clone()));
+                continue;
+            }
+        }
+        if let Some(p) = fit_slow(data, &y0, slow_x, &set) {
+            if let Some(m) = catalogue::with_slow(model, &p, u_range) {
+                if refit {
+                    refit_done = Some(m.clone());
+                }
+                jobs.push((effect, refit, m));
+            }
+        }
+    }
+    // Fast effects: bounded search on the fast records.
+    let fast_idx: Vec<usize> = {
+        let f: Vec<usize> = (0..data.len()).filter(|&i| data[i].is_fast()).collect();
+        if f.is_empty() { (0..data.len()).collect() } else { f }
+    };
+    let fast_fits: Vec<Option<(String, bool, ModelFile, f64)>> = par_map(&FAST, |e| {
+        let refit = catalogue::present(model, e);
+        fit_fast(model, data, &fast_idx, e).map(|(m, cost)| (e.to_string(), refit, m, cost))
+    });
+    let cur_fast_cost: f64 = fast_idx.iter().map(|&i| data[i].len() as f64 * cur_mse[i].max(1e-14).ln()).sum();
+    for (effect, refit, m, cost) in fast_fits.into_iter().flatten() {
+        // Simulate in full only what helps on the fast records (10 % of their MSE at least).
+        let n_fast: f64 = fast_idx.iter().map(|&i| data[i].len() as f64).sum();
+        if cost < cur_fast_cost + n_fast * (0.9f64).ln() {
+            jobs.push((effect, refit, m));
+        }
+    }
+    let results = par_map(&jobs, |(effect, refit, m)| -> anyhow::Result<Candidate> {
+        let sims: Vec<Vec<f64>> = data.iter().map(|d| sim(m, d)).collect::<anyhow::Result<_>>()?;
+        let mse_v = data.iter().zip(&sims).map(|(d, s)| mse(&d.y_v, s)).collect();
+        let k = if *refit { 0 } else { catalogue::param_count(effect) };
+        Ok(Candidate {
+            effect: effect.clone(),
+            refit: *refit,
+            model: m.clone(),
+            k,
+            sims,
+            mse: mse_v,
+        })
+    });
+    results.into_iter().collect()
+}
+
+/// Fit a fast effect on the fast records: returns the model and its cost
+/// `sum n_r ln MSE_r` over those records.
+fn fit_fast(model: &ModelFile, data: &[Data], idx: &[usize], effect: &str) -> Option<(ModelFile, f64)> {
+    let spec = catalogue::fast_spec(effect)?;
+    let cost = |m: &ModelFile| -> f64 {
+        let mut c = 0.0;
+        for &i in idx {
+            match sim(m, &data[i]) {
+                Ok(s) => c += data[i].len() as f64 * mse(&data[i].y_v, &s).max(1e-14).ln(),
+                Err(_) => return f64::INFINITY,
+            }
+        }
+        c
+    };
+    let (x0, z0) = catalogue::fast_value(model, effect).unwrap_or((f64::NAN, 0.05));
+    let to = |x: f64| if spec.log { x.ln() } else { x };
+    let from = |x: f64| if spec.log { x.exp() } else { x };
+    let (a, b) = (to(spec.lo), to(spec.hi));
+    let mut z = if effect == "resonance" { z0 } else { 0.0 };
+    let grid = 16;
+    let mut best = (f64::INFINITY, a);
+    let zs: Vec<f64> = if effect == "resonance" { vec![0.02, 0.06, 0.15] } else { vec![z] };
+    for &zz in &zs {
+        for g in 0..=grid {
+            let x = a + (b - a) * g as f64 / grid as f64;
+            let c = cost(&catalogue::with_fast(model, effect, from(x), zz));
+            if c < best.0 {
+                best = (c, x);
+                z = zz;
+            }
+        }
+    }
+    if x0.is_finite() {
+        let c = cost(&catalogue::with_fast(model, effect, x0, z0));
+        if c < best.0 {
+            best = (c, to(x0));
+            z = z0;
+        }
+    }
+    let h = (b - a) / grid as f64;
+    let x = golden(best.1 - h, best.1 + h, a, b, |x| cost(&catalogue::with_fast(model, effect, from(x), z)));
+    let mut xbest = from(x);
+    if effect == "resonance" {
+        let lz = golden((z / 3.0).ln(), (z * 3.0).ln(), (0.005f64).ln(), (0.5f64).ln(), |lz| {
+            cost(&catalogue::with_fast(model, effect, xbest, lz.exp()))
+        });
+        z = lz.exp();
+        let x2 = golden(to(xbest) - h / 2.0, to(xbest) + h / 2.0, a, b, |x| {
+            cost(&catalogue::with_fast(model, effect, from(x), z))
+        });
+        xbest = from(x2);
+    }
+    let m = catalogue::with_fast(model, effect, xbest, z);
+    let c = cost(&m);
+    c.is_finite().then_some((m, c))
+}
+
+/// Golden-section minimum of `f` on `[lo, hi]` clipped to `[a, b]` (20 evaluations).
+fn golden(lo: f64, hi: f64, a: f64, b: f64, f: impl Fn(f64) -> f64) -> f64 {
+    let (mut lo, mut hi) = (lo.max(a), hi.min(b));
+    let r = 0.5 * (5f64.sqrt() - 1.0);
+    let mut x1 = hi - r * (hi - lo);
+    let mut x2 = lo + r * (hi - lo);
+    let (mut f1, mut f2) = (f(x1), f(x2));
+    for _ in 0..18 {
+        if f1 < f2 {
+            hi = x2;
+            x2 = x1;
+            f2 = f1;
+            x1 = hi - r * (hi - lo);
+            f1 = f(x1);
+        } else {
+            lo = x1;
+            x1 = x2;
+            f1 = f2;
+            x2 = lo + r * (hi - lo);
+            f2 = f(x2);
+        }
+    }
+    if f1 < f2 { x1 } else { x2 }
+}
+
+/// The slow effects' regressors at every record's samples (they depend on the input only).
+pub struct SlowRegressors {
+    /// Per record: columns (drift lags for each grid time constant, play terms, gain terms).
+    cols: Vec<Vec<Vec<f64>>>,
+    /// Per record: is the sample settled (used by the solve)?
+    mask: Vec<Vec<bool>>,
+}
+
+const N_TAU: usize = catalogue::DRIFT_TAU_GRID_S.len();
+const N_PLAY: usize = params::PLAY_OPERATORS;
+const COL_PLAY: usize = N_TAU;
+const COL_GAIN: usize = N_TAU + N_PLAY;
+const N_COLS: usize = N_TAU + N_PLAY + 2;
+
+fn slow_regressors(data: &[Data]) -> SlowRegressors {
+    let mut cols = Vec::new();
+    let mut mask = Vec::new();
+    for d in data {
+        let n = d.len();
+        let t = d.period_s();
+        let mut c: Vec<Vec<f64>> = Vec::with_capacity(N_COLS);
+        for tau in catalogue::DRIFT_TAU_GRID_S {
+            // Exact ZOH first-order lag of the held input, at rest at u[0].
+            let a = (-t / tau).exp();
+            let mut x = d.u_v[0];
+            let mut v = Vec::with_capacity(n);
+            for i in 0..n {
+                v.push(x);
+                x = a * x + (1.0 - a) * d.u_v[i];
+            }
+            c.push(v);
+        }
+        for r in params::PLAY_RADII_V {
+            let mut z = d.u_v[0];
+            c.push(
+                d.u_v
+                    .iter()
+                    .map(|&u| {
+                        z = z.max(u - r).min(u + r);
+                        z - u
+                    })
+                    .collect(),
+            );
+        }
+        c.push(d.u_v.iter().map(|u| params::PLANT_GAIN * u * u).collect());
+        c.push(d.u_v.iter().map(|u| params::PLANT_GAIN * u * u * u).collect());
+        // Settled: no input jump (> 20 mV) within SETTLE_S before.
+        let settle = (SETTLE_S / t).ceil() as usize;
+        let mut m = vec![true; n];
+        let mut last_jump: Option<usize> = None;
+        for i in 0..n {
+            if i > 0 && (d.u_v[i] - d.u_v[i - 1]).abs() > 0.02 {
+                last_jump = Some(i);
+            }
+            if let Some(j) = last_jump {
+                if i - j <= settle {
+                    m[i] = false;
+                }
+            }
+        }
+        cols.push(c);
+        mask.push(m);
+    }
+    SlowRegressors { cols, mask }
+}
+
+/// The joint weighted least-squares fit of the slow effects in `set` to the residual of the
+/// model without slow effects (`y0`). Records weigh equally. Drift time constants: the best
+/// three of the grid.
+fn fit_slow(data: &[Data], y0: &[Vec<f64>], x: &SlowRegressors, set: &[&str]) -> Option<SlowParams> {
+    // Gram matrix of all columns and the target.
+    let mut g = DMatrix::<f64>::zeros(N_COLS, N_COLS);
+    let mut b = DVector::<f64>::zeros(N_COLS);
+    for (r, d) in data.iter().enumerate() {
+        let cols = &x.cols[r];
+        let m = &x.mask[r];
+        let n_used = m.iter().filter(|v| **v).count().max(1) as f64;
+        let w = 1.0 / n_used;
+        let mut gl = [[0.0f64; N_COLS]; N_COLS];
+        let mut bl = [0.0f64; N_COLS];
+        let mut row = [0.0f64; N_COLS];
+        for i in 0..d.len() {
+            if !m[i] {
+                continue;
+            }
+            let e = d.y_v[i] - y0[r][i];
+            for (k, c) in cols.iter().enumerate() {
+                row[k] = c[i];
+            }
+            for k in 0..N_COLS {
+                bl[k] += row[k] * e;
+                for l in 0..=k {
+                    gl[k][l] += row[k] * row[l];
+                }
+            }
+        }
+        for k in 0..N_COLS {
+            b[k] += w * bl[k];
+            for l in 0..=k {
+                g[(k, l)] += w * gl[k][l];
+                if l != k {
+                    g[(l, k)] += w * gl[k][l];
+                }
+            }
+        }
+    }
+    let solve = |idx: &[usize]| -> Option<(Vec<f64>, f64)> {
+        let p = idx.len();
+        let mut a = DMatrix::<f64>::zeros(p, p);
+        let mut v = DVector::<f64>::zeros(p);
+        for (i, &ki) in idx.iter().enumerate() {
+            v[i] = b[ki];
+            for (j, &kj) in idx.iter().enumerate() {
+                a[(i, j)] = g[(ki, kj)];
+            }
+        }
+        let tr = (0..p).map(|i| a[(i, i)]).sum::<f64>() / p.max(1) as f64;
+        for i in 0..p {
+            a[(i, i)] += 1e-10 * tr + 1e-15;
+        }
+        let beta = a.clone().cholesky()?.solve(&v);
+        // Reduction of the weighted SSR.
+        let red = beta.dot(&v);
+        beta.iter().all(|x| x.is_finite()).then(|| (beta.iter().copied().collect(), red))
+    };
+    let mut fixed: Vec<usize> = Vec::new();
+    if set.contains(&"hysteresis") {
+        fixed.extend(COL_PLAY..COL_PLAY + N_PLAY);
+    }
+    if set.contains(&"nonlinear-gain") {
+        fixed.extend([COL_GAIN, COL_GAIN + 1]);
+    }
+    let unpack = |idx: &[usize], beta: &[f64], taus: Option<[usize; 3]>| -> SlowParams {
+        let get = |k: usize| idx.iter().position(|&c| c == k).and_then(|p| beta.get(p).copied()).unwrap_or(0.0);
+        SlowParams {
+            drift: taus.map(|t| {
+                (
+                    [get(t[0]), get(t[1]), get(t[2])],
+                    [catalogue::DRIFT_TAU_GRID_S[t[0]], catalogue::DRIFT_TAU_GRID_S[t[1]], catalogue::DRIFT_TAU_GRID_S[t[2]]],
+                )
+            }),
+            hysteresis: set.contains(&"hysteresis").then(|| {
+                let mut w = [0.0; N_PLAY];
+                for (i, wi) in w.iter_mut().enumerate() {
+                    *wi = get(COL_PLAY + i);
+                }
+                w
+            }),
+            gain: set.contains(&"nonlinear-gain").then(|| (get(COL_GAIN), get(COL_GAIN + 1))),
+        }
+    };
+    if set.contains(&"drift") {
+        let mut best: Option<(f64, Vec<usize>, Vec<f64>, [usize; 3])> = None;
+        for i in 0..N_TAU {
+            for j in i + 1..N_TAU {
+                for k in j + 1..N_TAU {
+                    let mut idx = vec![i, j, k];
+                    idx.extend(&fixed);
+                    if let Some((beta, red)) = solve(&idx) {
+                        let ok = beta.iter().take(3).all(|g| g.abs() <= 1.0);
+                        if ok && best.as_ref().is_none_or(|b| red > b.0) {
+                            best = Some((red, idx, beta, [i, j, k]));
+                        }
+                    }
+                }
+            }
+        }
+        let (_, idx, beta, taus) = best?;
+        Some(unpack(&idx, &beta, Some(taus)))
+    } else {
+        if fixed.is_empty() {
+            return None;
+        }
+        let (beta, _) = solve(&fixed)?;
+        Some(unpack(&fixed, &beta, None))
+    }
+}
+
+/// Read the records named on the command line: CSV or MATLAB v5 `.mat` (with `vars`).
+pub fn load_data(paths: &[std::path::PathBuf], vars: Option<&str>) -> anyhow::Result<Vec<Data>> {
+    if paths.is_empty() {
+        bail!("no records: give at least one --data FILE");
+    }
+    let mut out = Vec::new();
+    for p in paths {
+        let name = p.file_name().map_or_else(|| p.display().to_string(), |s| s.to_string_lossy().into_owned());
+        let is_mat = p.extension().is_some_and(|e| e.eq_ignore_ascii_case("mat"));
+        let rec = if is_mat {
+            crate::mat::read_record(p, vars.unwrap_or("t=t,u=u,y=y"))?
+        } else {
+            Record::read(p).with_context(|| format!("record {}", p.display()))?
+        };
+        out.push(Data::from_record(&name, rec)?);
+    }
+    Ok(out)
+}

@@ -1,0 +1,247 @@
+//! The HTML report of `piezo gap --report DIR`: one `index.html` with inline SVG plots
+//! (plotters) a person would look at:
+//! * measured vs simulated, base and final model, for every record;
+//! * the residual before and after each step, for every record;
+//! * each effect's evidence: residual against input (hysteresis loop), residual during holds
+//!   (drift tails), static residual against input (gain curve), the first step edges of the
+//!   fast record (delay, pole, slew), the residual spectrum (resonance).
+
+use super::{Data, Diagnosis};
+use crate::model_file::ModelFile;
+use anyhow::Context;
+use plotters::prelude::*;
+use std::fmt::Write as _;
+use std::path::Path;
+
+const COLORS: [RGBColor; 6] = [
+    RGBColor(31, 119, 180),
+    RGBColor(214, 39, 40),
+    RGBColor(44, 160, 44),
+    RGBColor(255, 127, 14),
+    RGBColor(148, 103, 189),
+    RGBColor(80, 80, 80),
+];
+
+type Series = (String, Vec<(f64, f64)>);
+
+/// At most `max` points, evenly picked.
+fn thin(v: Vec<(f64, f64)>, max: usize) -> Vec<(f64, f64)> {
+    if v.len() <= max {
+        return v;
+    }
+    let step = v.len() as f64 / max as f64;
+    (0..max).filter_map(|i| v.get((i as f64 * step) as usize).copied()).collect()
+}
+
+/// A line (or point) plot as an SVG string.
+fn plot(title: &str, xl: &str, yl: &str, series: &[Series], points: bool, log_y: bool) -> String {
+    let mut svg = String::new();
+    let r = (|| -> Result<(), Box<dyn std::error::Error>> {
+        let root = SVGBackend::with_string(&mut svg, (760, 330)).into_drawing_area();
+        root.fill(&WHITE)?;
+        let all = series.iter().flat_map(|s| s.1.iter());
+        let (mut x0, mut x1, mut y0, mut y1) = (f64::INFINITY, f64::NEG_INFINITY, f64::INFINITY, f64::NEG_INFINITY);
+        for &(x, y) in all {
+            if x.is_finite() && y.is_finite() && (!log_y || y > 0.0) {
+                x0 = x0.min(x);
+                x1 = x1.max(x);
+                y0 = y0.min(y);
+                y1 = y1.max(y);
+            }
+        }
+        if !(x0.is_finite() && y0.is_finite()) {
+            return Ok(());
+        }
+        if x1 <= x0 {
+            x1 = x0 + 1.0;
+        }
+        if y1 <= y0 {
+            y1 = y0 + 1e-6;
+        }
+        let pad = 0.05 * (y1 - y0);
+        let mut b = ChartBuilder::on(&root);
+        b.caption(title, ("sans-serif", 16)).margin(8).x_label_area_size(36).y_label_area_size(64);
+        if log_y {
+            let mut c = b.build_cartesian_2d(x0..x1, (y0.max(1e-9)..y1 * 1.5).log_scale())?;
+            c.configure_mesh().x_desc(xl).y_desc(yl).draw()?;
+            for (i, (name, pts)) in series.iter().enumerate() {
+                let col = COLORS[i % COLORS.len()];
+                c.draw_series(LineSeries::new(pts.iter().copied().filter(|p| p.1 > 0.0), col.stroke_width(1)))?
+                    .label(name.as_str())
+                    .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 16, y)], col));
+            }
+            c.configure_series_labels().background_style(WHITE.mix(0.8)).border_style(BLACK).draw()?;
+        } else {
+            let mut c = b.build_cartesian_2d(x0..x1, (y0 - pad)..(y1 + pad))?;
+            c.configure_mesh().x_desc(xl).y_desc(yl).draw()?;
+            for (i, (name, pts)) in series.iter().enumerate() {
+                let col = COLORS[i % COLORS.len()];
+                if points {
+                    c.draw_series(pts.iter().map(|p| Circle::new(*p, 1, col.filled())))?
+                        .label(name.as_str())
+                        .legend(move |(x, y)| Circle::new((x + 8, y), 3, col.filled()));
+                } else {
+                    c.draw_series(LineSeries::new(pts.iter().copied(), col.stroke_width(1)))?
+                        .label(name.as_str())
+                        .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 16, y)], col));
+                }
+            }
+            c.configure_series_labels().background_style(WHITE.mix(0.8)).border_style(BLACK).draw()?;
+        }
+        root.present()?;
+        Ok(())
+    })();
+    if let Err(e) = r {
+        return format!("<p>plot failed: {e}</p>");
+    }
+    svg
+}
+
+fn esc(s: &str) -> String {
+    s.replace('&', "&amp;").replace('<', "&lt;").replace('>', "&gt;")
+}
+
+/// Write `dir/index.html`.
+pub fn write(dir: &Path, base: &ModelFile, data: &[Data], d: &Diagnosis) -> anyhow::Result<()> {
+    std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
+    let mut h = String::new();
+    let _ = write!(
+        h,
+        "<!doctype html><html><head><meta charset=\"utf-8\"><title>piezo gap report</title>\
+         <style>body{{font-family:sans-serif;max-width:1600px;margin:auto}}table{{border-collapse:collapse}}\
+         td,th{{border:1px solid #aaa;padding:3px 8px;font-size:13px}}.row{{display:flex;flex-wrap:wrap}}</style></head><body>\
+         <h1>Model gap: {} &rarr; named [{}]</h1><p>Noise floor {:.2} mV; residual {:.2} mV with the base model, {:.2} mV at the end.</p>",
+        esc(&base.name),
+        esc(&d.named.join(", ")),
+        1e3 * d.noise_floor_v,
+        1e3 * d.steps.first().map_or(d.final_rms_v, |s| s.rms_before_v),
+        1e3 * d.final_rms_v
+    );
+    h.push_str("<h2>Steps</h2><table><tr><th>step</th><th>effect</th><th>evidence</th><th>parameters</th><th>RMS before</th><th>RMS after</th></tr>");
+    for (i, s) in d.steps.iter().enumerate() {
+        let p: Vec<String> = s.params.iter().map(|(k, v)| format!("{k} = {v}")).collect();
+        let _ = write!(
+            h,
+            "<tr><td>{}</td><td>{}{}</td><td>{}</td><td>{}</td><td>{:.2} mV</td><td>{:.2} mV</td></tr>",
+            i + 1,
+            esc(&s.effect),
+            if s.refit { " (refit)" } else { "" },
+            esc(&s.evidence),
+            esc(&p.join(", ")),
+            1e3 * s.rms_before_v,
+            1e3 * s.rms_after_v
+        );
+    }
+    h.push_str("</table>");
+    let final_sims: Vec<&Vec<f64>> = (0..data.len())
+        .map(|r| d.steps.last().map_or(&d.base_sims[r], |s| &s.sims[r]))
+        .collect();
+    h.push_str("<h2>Measured and simulated</h2><div class=\"row\">");
+    for (r, rec) in data.iter().enumerate() {
+        let pts = |v: &[f64]| thin(rec.t_s.iter().copied().zip(v.iter().copied()).collect(), 3000);
+        h.push_str(&plot(
+            &format!("{}: measured and simulated", rec.name),
+            "t (s)",
+            "y (V)",
+            &[
+                ("measured".into(), pts(&rec.y_v)),
+                ("base model".into(), pts(&d.base_sims[r])),
+                ("final model".into(), pts(final_sims[r])),
+            ],
+            false,
+            false,
+        ));
+    }
+    h.push_str("</div><h2>Residual before and after each step</h2><div class=\"row\">");
+    for (r, rec) in data.iter().enumerate() {
+        let res = |s: &[f64]| {
+            thin(
+                rec.t_s.iter().zip(rec.y_v.iter().zip(s)).map(|(t, (y, m))| (*t, 1e3 * (y - m))).collect(),
+                3000,
+            )
+        };
+        let mut series = vec![("base".to_string(), res(&d.base_sims[r]))];
+        for (i, s) in d.steps.iter().enumerate() {
+            series.push((format!("after {}: {}", i + 1, s.effect), res(&s.sims[r])));
+        }
+        h.push_str(&plot(&format!("{}: residual", rec.name), "t (s)", "residual (mV)", &series, false, false));
+    }
+    h.push_str("</div><h2>Evidence (base model's residual)</h2><div class=\"row\">");
+    // Residual against input (loop), static curve and tails, on the slow records.
+    for (r, rec) in data.iter().enumerate().filter(|(_, x)| !x.is_fast()) {
+        let res: Vec<f64> = rec.y_v.iter().zip(&d.base_sims[r]).map(|(y, m)| 1e3 * (y - m)).collect();
+        let loop_pts = thin(rec.u_v.iter().copied().zip(res.iter().copied()).collect(), 4000);
+        h.push_str(&plot(
+            &format!("{}: residual against input (hysteresis loop, gain curve)", rec.name),
+            "u (V)",
+            "residual (mV)",
+            &[("residual".into(), loop_pts)],
+            true,
+            false,
+        ));
+        // Tails: residual during holds, time since the hold began.
+        let mut tails: Vec<Series> = Vec::new();
+        let n = rec.len();
+        let t = rec.period_s();
+        let mut i = 1;
+        while i < n {
+            let s = i;
+            while i < n && (rec.u_v[i] - rec.u_v[s]).abs() <= 1e-9 {
+                i += 1;
+            }
+            if (i - s) as f64 * t >= 0.2 && tails.len() < 6 {
+                let pts: Vec<(f64, f64)> = (s..i).map(|k| ((k - s) as f64 * t, res[k] - res[s.min(n - 1)])).collect();
+                tails.push((format!("hold at {:.2} V", rec.u_v[s]), thin(pts, 1500)));
+            }
+            i += 1;
+        }
+        if !tails.is_empty() {
+            h.push_str(&plot(
+                &format!("{}: residual during holds (drift tails)", rec.name),
+                "time since the step (s)",
+                "residual change (mV)",
+                &tails,
+                false,
+                false,
+            ));
+        }
+    }
+    for (r, rec) in data.iter().enumerate().filter(|(_, x)| x.is_fast()).take(1) {
+        let n = rec.len().min((0.03 / rec.period_s()) as usize);
+        let pts = |v: &[f64]| rec.t_s[..n].iter().copied().zip(v[..n].iter().copied()).collect::<Vec<_>>();
+        h.push_str(&plot(
+            &format!("{}: first step edges (delay, pole, slew, ringing)", rec.name),
+            "t (s)",
+            "y (V)",
+            &[
+                ("measured".into(), pts(&rec.y_v)),
+                ("base model".into(), pts(&d.base_sims[r])),
+                ("final model".into(), pts(final_sims[r])),
+            ],
+            false,
+            false,
+        ));
+    }
+    if !d.signatures.spectrum.is_empty() {
+        let pts: Vec<(f64, f64)> = d.signatures.spectrum.iter().map(|(f, a)| (*f, *a * 1e3)).collect();
+        h.push_str(&plot(
+            "residual spectrum of the fast record (base model)",
+            "f (Hz)",
+            "amplitude (mV)",
+            &[("residual".into(), thin(pts, 4000))],
+            false,
+            true,
+        ));
+    }
+    h.push_str("</div><h2>Candidates tried</h2>");
+    for (i, t) in d.tried.iter().enumerate() {
+        let _ = write!(h, "<p>step {}: ", i + 1);
+        for (e, s, x, ok) in t {
+            let _ = write!(h, "{} (score {:.0}, explains {:.0} %{}); ", esc(e), s, 100.0 * x, if *ok { "" } else { ", not admissible" });
+        }
+        h.push_str("</p>");
+    }
+    let _ = write!(h, "<h2>Augmented model</h2><pre>{}</pre></body></html>", esc(&d.model.to_toml().unwrap_or_default()));
+    std::fs::write(dir.join("index.html"), h).with_context(|| format!("cannot write {}", dir.join("index.html").display()))?;
+    Ok(())
+}

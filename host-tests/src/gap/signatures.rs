@@ -1,0 +1,223 @@
+//! Where the disagreement is, in time and in frequency: the signature of each effect.
+//!
+//! * **after edges** (fast records): the share of the residual power within 3 ms after an
+//!   input jump: time delay, amplifier pole, slew limiter and resonance live there;
+//! * **spectrum** (fast records, rustfft): the residual's strongest line above 500 Hz and how
+//!   far it stands above the median level: a second mode rings at its frequency;
+//! * **tails** (holds of at least 0.2 s): how far the residual moves from shortly after a step
+//!   to the end of the hold: drift;
+//! * **loop** (slowly moving input): the largest gap between the residual on rising and on
+//!   falling input at the same input level: hysteresis;
+//! * **static curve** (settled samples): the curvature of the residual against the input:
+//!   non-linear gain;
+//! * **range**: whether the input comes near the amplifier's limits: saturation.
+//!
+//! Each is a number with a unit; [`Signatures::supports`] turns them into the gate the
+//! selection uses, [`Signatures::describe`] into words for the table.
+
+use super::Data;
+use model_core::params;
+use rustfft::{FftPlanner, num_complex::Complex};
+
+/// The measured signatures of a residual.
+#[derive(Clone, Debug, Default)]
+pub struct Signatures {
+    /// Share of the fast records' residual power within 3 ms after edges.
+    pub edge_share: f64,
+    /// Strongest spectral line of the fast records' residual above 500 Hz, Hz.
+    pub peak_hz: f64,
+    /// Its height over the median spectral level.
+    pub peak_ratio: f64,
+    /// Largest tail after a step during a hold, volts.
+    pub tail_v: f64,
+    /// Largest rising/falling gap of the residual at equal input, volts.
+    pub loop_v: f64,
+    /// Curvature of the residual against the input (largest deviation from the chord), volts.
+    pub curve_v: f64,
+    /// Input span (min, max), volts.
+    pub u_span_v: (f64, f64),
+    /// Noise floor, volts.
+    pub noise_v: f64,
+    /// Residual spectrum of the first fast record: (frequency Hz, magnitude V) for plots.
+    pub spectrum: Vec<(f64, f64)>,
+}
+
+/// The signatures of the residuals `y - sims`.
+pub fn compute(data: &[Data], sims: &[Vec<f64>], noise: &[f64]) -> Signatures {
+    let mut s = Signatures {
+        noise_v: (noise.iter().map(|x| x * x).sum::<f64>() / noise.len().max(1) as f64).sqrt(),
+        u_span_v: (f64::INFINITY, f64::NEG_INFINITY),
+        ..Default::default()
+    };
+    let mut edge_p = 0.0;
+    let mut all_p = 0.0;
+    for (d, y) in data.iter().zip(sims) {
+        let r: Vec<f64> = d.y_v.iter().zip(y).map(|(a, b)| a - b).collect();
+        let (lo, hi) = super::min_max(&d.u_v);
+        s.u_span_v = (s.u_span_v.0.min(lo), s.u_span_v.1.max(hi));
+        let t = d.period_s();
+        let n = d.len();
+        if d.is_fast() {
+            let win = (3e-3 / t).ceil() as usize;
+            let mut since = usize::MAX;
+            for i in 0..n {
+                if i > 0 && (d.u_v[i] - d.u_v[i - 1]).abs() > 0.02 {
+                    since = 0;
+                } else {
+                    since = since.saturating_add(1);
+                }
+                let p = r[i] * r[i];
+                all_p += p;
+                if since <= win {
+                    edge_p += p;
+                }
+            }
+            let (f, ratio, spec) = spectrum_peak(&r, t);
+            if ratio > s.peak_ratio {
+                s.peak_hz = f;
+                s.peak_ratio = ratio;
+            }
+            if s.spectrum.is_empty() {
+                s.spectrum = spec;
+            }
+        }
+        // Holds: runs of constant input of at least 0.2 s.
+        let mut i = 1;
+        while i < n {
+            let start = i;
+            while i < n && (d.u_v[i] - d.u_v[start]).abs() <= 1e-9 {
+                i += 1;
+            }
+            let len = i - start;
+            if len as f64 * t >= 0.2 {
+                let skip = ((0.02 / t).ceil() as usize).min(len / 4);
+                let w = ((len - skip) / 10).max(1);
+                let a = mean(&r[start + skip..start + skip + w]);
+                let b = mean(&r[i - w..i]);
+                s.tail_v = s.tail_v.max((b - a).abs());
+            }
+            i += 1;
+        }
+        // Loop and curve, on slowly moving input (no jumps).
+        let bins = 20;
+        let mut up = vec![(0.0, 0usize); bins];
+        let mut down = vec![(0.0, 0usize); bins];
+        let span = (hi - lo).max(1e-9);
+        let mut xs = Vec::new();
+        for i in 1..n {
+            let du = d.u_v[i] - d.u_v[i - 1];
+            if du.abs() > 0.02 || du == 0.0 {
+                continue;
+            }
+            let b = (((d.u_v[i] - lo) / span * bins as f64) as usize).min(bins - 1);
+            let slot = if du > 0.0 { &mut up[b] } else { &mut down[b] };
+            slot.0 += r[i];
+            slot.1 += 1;
+            xs.push((d.u_v[i], r[i]));
+        }
+        for b in 0..bins {
+            if up[b].1 >= 20 && down[b].1 >= 20 {
+                let gap = up[b].0 / up[b].1 as f64 - down[b].0 / down[b].1 as f64;
+                s.loop_v = s.loop_v.max(gap.abs());
+            }
+        }
+        if xs.len() >= 50 {
+            s.curve_v = s.curve_v.max(curvature(&xs, lo, hi));
+        }
+    }
+    s.edge_share = if all_p > 0.0 { edge_p / all_p } else { 0.0 };
+    s
+}
+
+fn mean(v: &[f64]) -> f64 {
+    v.iter().sum::<f64>() / v.len().max(1) as f64
+}
+
+/// Largest deviation of a quadratic least-squares fit of `r` against `u` from its chord.
+fn curvature(xs: &[(f64, f64)], lo: f64, hi: f64) -> f64 {
+    // Normal equations for r = a + b u + c u^2 (u centred and scaled).
+    let m = 0.5 * (lo + hi);
+    let h = (0.5 * (hi - lo)).max(1e-9);
+    let mut g = [[0.0f64; 3]; 3];
+    let mut v = [0.0f64; 3];
+    for &(u, r) in xs {
+        let x = (u - m) / h;
+        let row = [1.0, x, x * x];
+        for i in 0..3 {
+            v[i] += row[i] * r;
+            for j in 0..3 {
+                g[i][j] += row[i] * row[j];
+            }
+        }
+    }
+    let a = nalgebra::Matrix3::from_fn(|i, j| g[i][j]);
+    let b = nalgebra::Vector3::from_fn(|i, _| v[i]);
+    match a.lu().solve(&b) {
+        // The quadratic term's largest deviation from the chord over x in [-1, 1] is |c|.
+        Some(c) => c[2].abs(),
+        None => 0.0,
+    }
+}
+
+/// The strongest line above 500 Hz: (frequency, height over the median, the spectrum).
+fn spectrum_peak(r: &[f64], t: f64) -> (f64, f64, Vec<(f64, f64)>) {
+    let n = r.len().min(1 << 16);
+    if n < 64 {
+        return (0.0, 0.0, vec![]);
+    }
+    let m = mean(&r[..n]);
+    let mut buf: Vec<Complex<f64>> = r[..n]
+        .iter()
+        .enumerate()
+        .map(|(i, x)| {
+            let w = 0.5 - 0.5 * (2.0 * std::f64::consts::PI * i as f64 / n as f64).cos();
+            Complex::new((x - m) * w, 0.0)
+        })
+        .collect();
+    FftPlanner::new().plan_fft_forward(n).process(&mut buf);
+    let df = 1.0 / (n as f64 * t);
+    let spec: Vec<(f64, f64)> = (1..n / 2).map(|k| (k as f64 * df, 4.0 * buf[k].norm() / n as f64)).collect();
+    let hi: Vec<&(f64, f64)> = spec.iter().filter(|(f, _)| *f >= 500.0).collect();
+    if hi.is_empty() {
+        return (0.0, 0.0, spec);
+    }
+    let mut mags: Vec<f64> = hi.iter().map(|x| x.1).collect();
+    let med = super::median_pub(&mut mags).max(1e-15);
+    let (f, a) = hi.iter().fold((0.0, 0.0), |acc, x| if x.1 > acc.1 { (x.0, x.1) } else { acc });
+    (f, a / med, spec)
+}
+
+impl Signatures {
+    /// Does the residual show the signature of `effect`? (The gate of the selection.)
+    pub fn supports(&self, effect: &str) -> bool {
+        let lim_lo = params::AMP_INPUT_MIN_V + 0.5;
+        let lim_hi = params::AMP_INPUT_MAX_V - 0.5;
+        match effect {
+            "saturation" => self.u_span_v.0 <= lim_lo || self.u_span_v.1 >= lim_hi,
+            _ => true,
+        }
+    }
+
+    /// The evidence for `effect` in words.
+    pub fn describe(&self, effect: &str) -> String {
+        let mv = |v: f64| format!("{:.1} mV", 1e3 * v);
+        match effect {
+            "time-delay" | "amplifier-pole" | "slew-rate-limit" => format!(
+                "{:.0} % of the fast residual power within 3 ms after edges",
+                100.0 * self.edge_share
+            ),
+            "resonance" => format!(
+                "residual line at {:.0} Hz, {:.0}x the median spectral level",
+                self.peak_hz, self.peak_ratio
+            ),
+            "drift" => format!("tails after steps up to {} during holds", mv(self.tail_v)),
+            "hysteresis" => format!("residual differs by up to {} between rising and falling input", mv(self.loop_v)),
+            "nonlinear-gain" => format!("static residual curves by {} against the input", mv(self.curve_v)),
+            "saturation" => format!(
+                "input spans {:.2}..{:.2} V, near the amplifier's limits",
+                self.u_span_v.0, self.u_span_v.1
+            ),
+            _ => String::new(),
+        }
+    }
+}

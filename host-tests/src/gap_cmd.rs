@@ -1,0 +1,66 @@
+//! `piezo gap --model BASE --data FILE [--data FILE ...] [--out MODEL.toml] [--report DIR]
+//! [--json] [--vars t=NAME,u=NAME,y=NAME]`: the model-gap workflow ([`crate::gap`]) from the
+//! command line.
+//!
+//! Records are CSV ([`crate::record`]) or MATLAB v5 `.mat` files ([`crate::mat`], variables
+//! named by `--vars`, default `t=t,u=u,y=y`). The table goes to stdout (or one JSON object
+//! with `--json`: `{"named", "steps": [{"effect", "evidence", "params", "rms_before_v",
+//! "rms_after_v"}], "noise_floor_v", "final_rms_v"}`), a progress bar to stderr.
+
+use crate::gap::{Options, diagnose, load_data, report};
+use crate::model_file::ModelFile;
+use clap::Args;
+use std::path::PathBuf;
+
+/// Arguments of `piezo gap`.
+#[derive(Args, Debug, Clone)]
+pub struct GapArgs {
+    /// Base model: a model file or a built-in name (thesis-linear, thesis-full).
+    #[arg(long)]
+    pub model: String,
+    /// Measured record (CSV t,u,y or MATLAB v5 .mat); repeat for several records.
+    #[arg(long = "data", required = true)]
+    pub data: Vec<PathBuf>,
+    /// Write the augmented model file here.
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+    /// Write an HTML report with SVG plots into this directory.
+    #[arg(long)]
+    pub report: Option<PathBuf>,
+    /// Print one JSON object instead of the table.
+    #[arg(long)]
+    pub json: bool,
+    /// Variable names in .mat records: t=NAME,u=NAME,y=NAME.
+    #[arg(long)]
+    pub vars: Option<String>,
+}
+
+/// Run `piezo gap`.
+pub fn run(a: &GapArgs) -> anyhow::Result<()> {
+    if let Some(v) = &a.vars {
+        crate::mat::parse_vars(v)?;
+    }
+    let base = ModelFile::load(&a.model)?;
+    let data = load_data(&a.data, a.vars.as_deref())?;
+    let d = diagnose(&base, &data, &Options { progress: true })?;
+    if let Some(p) = &a.out {
+        let mut m = d.model.clone();
+        m.name = format!("{} + gap: {}", base.name, d.named.join(", "));
+        m.write(p)?;
+    }
+    if let Some(dir) = &a.report {
+        report::write(dir, &base, &data, &d)?;
+    }
+    if a.json {
+        println!("{}", serde_json::to_string(&d.to_json())?);
+    } else {
+        print!("{}", d.table());
+        if let Some(p) = &a.out {
+            println!("augmented model written to {}", p.display());
+        }
+        if let Some(dir) = &a.report {
+            println!("report written to {}", dir.join("index.html").display());
+        }
+    }
+    Ok(())
+}
