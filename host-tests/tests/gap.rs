@@ -170,7 +170,7 @@ fn run_case(kind: &[&str], seed: u64, slow_s: f64) -> Outcome {
     let mut cuts_ok = true;
     let mut worst_cut = String::new();
     for s in &d.steps {
-        if !tr.effects.contains(&s.effect) {
+        if s.removed || !tr.effects.contains(&s.effect) {
             continue;
         }
         let step_cut = s.rms_before_v / s.rms_after_v;

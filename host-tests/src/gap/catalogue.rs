@@ -98,6 +98,24 @@ pub fn without(m: &ModelFile, effect: &str) -> ModelFile {
     m
 }
 
+/// `m` with `effect` as `base` has it (absent if `base` lacks it): how an effect is taken
+/// back out of the model.
+pub fn revert(m: &ModelFile, base: &ModelFile, effect: &str) -> ModelFile {
+    let mut m = m.clone();
+    match effect {
+        "time-delay" => m.time_delay = base.time_delay.clone(),
+        "amplifier-pole" => m.amplifier_pole = base.amplifier_pole.clone(),
+        "resonance" => m.resonance = base.resonance.clone(),
+        "drift" => m.drift = base.drift.clone(),
+        "hysteresis" => m.hysteresis = base.hysteresis.clone(),
+        "nonlinear-gain" => m.nonlinear_gain = base.nonlinear_gain.clone(),
+        "slew-rate-limit" => m.slew_rate_limit = base.slew_rate_limit.clone(),
+        "saturation" => m.saturation = base.saturation.clone(),
+        _ => {}
+    }
+    m
+}
+
 /// The parameters of `effect` in `m`, as (name, value) pairs for tables and JSON.
 pub fn params_of(m: &ModelFile, effect: &str) -> Vec<(String, f64)> {
     let one = |k: &str, v: f64| vec![(k.to_string(), v)];

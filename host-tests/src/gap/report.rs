@@ -125,7 +125,7 @@ pub fn write(dir: &Path, base: &ModelFile, data: &[Data], d: &Diagnosis) -> anyh
             "<tr><td>{}</td><td>{}{}</td><td>{}</td><td>{}</td><td>{:.2} mV</td><td>{:.2} mV</td></tr>",
             i + 1,
             esc(&s.effect),
-            if s.refit { " (refit)" } else { "" },
+            if s.removed { " (removed)" } else if s.refit { " (refit)" } else { "" },
             esc(&s.evidence),
             esc(&p.join(", ")),
             1e3 * s.rms_before_v,
