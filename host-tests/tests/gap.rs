@@ -164,6 +164,12 @@ fn run_case(kind: &[&str], seed: u64, slow_s: f64) -> Outcome {
     let base = ModelFile::built_in("thesis-linear").unwrap();
     let d = diagnose(&base, &data, &Options::default()).expect("diagnosis");
     let _ = std::fs::remove_dir_all(&dir);
+    if std::env::var("GAP_DEBUG").is_ok() {
+        println!("seed {seed} truth {tr:?}\n{}", d.table());
+        for (i, t) in d.tried.iter().enumerate() {
+            println!("  tried at step {}: {t:?}", i + 1);
+        }
+    }
     // Each correctly named effect: its step cuts the residual >= 5x, or brings it within 1.5x
     // of the noise floor, or (in a pair) removing it from the final model raises the residual
     // >= 5x.
@@ -220,8 +226,12 @@ fn hidden_effects_are_named() {
     let release = !cfg!(debug_assertions);
     let ks = kinds();
     let n_cases = if release { 3 * ks.len() } else { 8 };
+    let only: Option<u64> = std::env::var("GAP_SEED").ok().and_then(|s| s.parse().ok());
     let slow_s = 30.0;
-    let cases: Vec<(Vec<&str>, u64)> = (0..n_cases).map(|i| (ks[(i * 7) % ks.len()].clone(), 1000 + i as u64)).collect();
+    let cases: Vec<(Vec<&str>, u64)> = (0..n_cases)
+        .map(|i| (ks[(i * 7) % ks.len()].clone(), 1000 + i as u64))
+        .filter(|c| only.is_none_or(|s| s == c.1))
+        .collect();
     let outcomes = gap::par_map(&cases, |(k, seed)| run_case(k, *seed, slow_s));
     // Confusion table: rows are the hidden effects (and "clean"), columns the names given.
     let mut names: Vec<&str> = gap::catalogue::EFFECTS.to_vec();
@@ -286,6 +296,9 @@ fn hidden_effects_are_named() {
     println!("residual-cut failures: {}", cut_fail.len());
     for c in &cut_fail {
         println!("  {c}");
+    }
+    if only.is_some() {
+        return;
     }
     assert!(outcomes.len() >= if release { 50 } else { 8 });
     assert_eq!(clean_named, 0, "clean records must get no name");

@@ -188,6 +188,20 @@ fn spectrum_peak(r: &[f64], t: f64) -> (f64, f64, Vec<(f64, f64)>) {
 }
 
 impl Signatures {
+    /// Height of the residual spectrum near `f_hz` (within 15 %) over its median level above
+    /// 500 Hz: is there a line where a fitted mode sits?
+    pub fn line_ratio_near(&self, f_hz: f64) -> f64 {
+        let mut mags: Vec<f64> = self.spectrum.iter().filter(|(f, _)| *f >= 500.0).map(|x| x.1).collect();
+        let med = super::median_pub(&mut mags).max(1e-15);
+        let near = self
+            .spectrum
+            .iter()
+            .filter(|(f, _)| (f / f_hz - 1.0).abs() <= 0.15)
+            .map(|x| x.1)
+            .fold(0.0f64, f64::max);
+        near / med
+    }
+
     /// Does the residual show the signature of `effect`? (The gate of the selection.)
     pub fn supports(&self, effect: &str) -> bool {
         let lim_lo = params::AMP_INPUT_MIN_V + 0.5;
