@@ -21,7 +21,11 @@ pub fn parse_vars(spec: &str) -> anyhow::Result<[String; 3]> {
             bail!("--vars: `{part}` is not KEY=NAME (expected t=NAME,u=NAME,y=NAME)");
         };
         let v = v.trim();
-        ensure!(!v.is_empty(), "--vars: empty variable name for `{}`", k.trim());
+        ensure!(
+            !v.is_empty(),
+            "--vars: empty variable name for `{}`",
+            k.trim()
+        );
         match k.trim() {
             "t" => t = Some(v.to_string()),
             "u" => u = Some(v.to_string()),
@@ -65,7 +69,10 @@ pub fn parse_record(bytes: &[u8], vars: &str) -> anyhow::Result<Record> {
     for (key, name) in ["t", "u", "y"].iter().zip(&names) {
         let Some(a) = mat.find_by_name(name) else {
             let found: Vec<&str> = mat.arrays().iter().map(|a| a.name()).collect();
-            bail!("variable `{name}` (for {key}) is not in the file (found: {})", found.join(", "));
+            bail!(
+                "variable `{name}` (for {key}) is not in the file (found: {})",
+                found.join(", ")
+            );
         };
         let size = a.size();
         let vector = size.len() == 2 && (size[0] == 1 || size[1] == 1);
@@ -97,7 +104,7 @@ pub fn write_v5(vars: &[(&str, &[f64])]) -> Vec<u8> {
     out.extend(0x0100u16.to_le_bytes());
     out.extend(b"IM");
     let pad8 = |v: &mut Vec<u8>| {
-        while v.len() % 8 != 0 {
+        while !v.len().is_multiple_of(8) {
             v.push(0);
         }
     };

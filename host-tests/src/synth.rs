@@ -38,6 +38,9 @@ pub enum Protocol {
     Sine,
     /// Raised sine with a linear frequency sweep.
     Chirp,
+    /// The model-gap recording protocol: a fast and a slow record
+    /// (`crate::gap::protocol`; `--seconds` is the slow record's length, at least 20 s).
+    Identification,
 }
 
 /// Arguments of `piezo synth`.
@@ -143,6 +146,7 @@ pub fn input(a: &SynthArgs, t_s: &[f64]) -> anyhow::Result<Vec<f64>> {
                 .map(|&t| o + amp * 0.5 * (1.0 - (2.0 * PI * (f * t + 0.5 * k * t * t)).cos()))
                 .collect()
         }
+        Protocol::Identification => bail!("the identification protocol writes two records (see crate::gap::protocol)"),
         Protocol::Forc => bail!("the forc protocol needs the hysteresis identification, which is not merged yet"),
     })
 }
@@ -165,6 +169,9 @@ pub fn synth(a: &SynthArgs) -> anyhow::Result<Record> {
 
 /// Run `piezo synth`.
 pub fn run(a: &SynthArgs) -> anyhow::Result<()> {
+    if a.protocol == Protocol::Identification {
+        return crate::gap::protocol::synth_identification(a);
+    }
     let rec = synth(a)?;
     rec.write(&a.output)?;
     eprintln!(

@@ -36,10 +36,17 @@ pub struct PlayConfig {
 impl PlayConfig {
     /// Finite, thresholds within 0..10 V, weights within -1..1.
     pub fn validate(&self) -> Result<(), ConfigError> {
-        if self.radii_v.iter().chain(&self.weights).any(|v| !v.is_finite()) {
+        if self
+            .radii_v
+            .iter()
+            .chain(&self.weights)
+            .any(|v| !v.is_finite())
+        {
             return Err(ConfigError::NotFinite);
         }
-        if self.radii_v.iter().any(|r| !(0.0..=10.0).contains(r)) || self.weights.iter().any(|w| w.abs() > 1.0) {
+        if self.radii_v.iter().any(|r| !(0.0..=10.0).contains(r))
+            || self.weights.iter().any(|w| w.abs() > 1.0)
+        {
             return Err(ConfigError::BadGain);
         }
         Ok(())
@@ -79,7 +86,9 @@ impl Play {
 
     /// At rest with `u_v` held for ever (every operator at the input: no hysteretic offset).
     pub fn steady_state(&self, u_v: f32) -> PlayState {
-        PlayState { z_v: [u_v; PLAY_OPERATORS] }
+        PlayState {
+            z_v: [u_v; PLAY_OPERATORS],
+        }
     }
 
     /// Advance with input `u_v` and return `h(u)`, sensor volts. A non-finite input leaves the

@@ -17,8 +17,8 @@
 //! every record by [`model_core::stage::Stage`] (never by a second simulator) and scored.
 
 use crate::model_file::{
-    DelaySection, DriftSection, GainSection, HysteresisSection, ModelFile, PoleSection, ResonanceSection,
-    SaturationSection, SlewSection,
+    DelaySection, DriftSection, GainSection, HysteresisSection, ModelFile, PoleSection,
+    ResonanceSection, SaturationSection, SlewSection,
 };
 use model_core::params;
 
@@ -38,7 +38,13 @@ pub const EFFECTS: [&str; 8] = [
 pub const SLOW: [&str; 3] = ["drift", "hysteresis", "nonlinear-gain"];
 
 /// The fast effects (fitted by a bounded search on the fast records).
-pub const FAST: [&str; 5] = ["time-delay", "amplifier-pole", "resonance", "slew-rate-limit", "saturation"];
+pub const FAST: [&str; 5] = [
+    "time-delay",
+    "amplifier-pole",
+    "resonance",
+    "slew-rate-limit",
+    "saturation",
+];
 
 /// Drift time constants the fit chooses three from, seconds (log grid, 5 ms..200 s; our
 /// assumption: covers the thesis' 0.06, 0.75 and 12 s and the hour-long creep's first minutes).
@@ -120,12 +126,17 @@ pub fn revert(m: &ModelFile, base: &ModelFile, effect: &str) -> ModelFile {
 pub fn params_of(m: &ModelFile, effect: &str) -> Vec<(String, f64)> {
     let one = |k: &str, v: f64| vec![(k.to_string(), v)];
     match effect {
-        "time-delay" => m.time_delay.as_ref().map_or(vec![], |d| one("delay_s", d.delay_s)),
-        "amplifier-pole" => m.amplifier_pole.as_ref().map_or(vec![], |p| one("pole_hz", p.pole_hz)),
-        "resonance" => m
-            .resonance
+        "time-delay" => m
+            .time_delay
             .as_ref()
-            .map_or(vec![], |r| vec![("mode_hz".into(), r.mode_hz), ("damping".into(), r.damping)]),
+            .map_or(vec![], |d| one("delay_s", d.delay_s)),
+        "amplifier-pole" => m
+            .amplifier_pole
+            .as_ref()
+            .map_or(vec![], |p| one("pole_hz", p.pole_hz)),
+        "resonance" => m.resonance.as_ref().map_or(vec![], |r| {
+            vec![("mode_hz".into(), r.mode_hz), ("damping".into(), r.damping)]
+        }),
         "drift" => m.drift.as_ref().map_or(vec![], |d| {
             let mut v = Vec::new();
             for i in 0..3 {
@@ -141,10 +152,12 @@ pub fn params_of(m: &ModelFile, effect: &str) -> Vec<(String, f64)> {
                 .map(|(r, w)| (format!("w_r{r}v"), *w))
                 .collect()
         }),
-        "nonlinear-gain" => m
-            .nonlinear_gain
-            .as_ref()
-            .map_or(vec![], |g| vec![("c1_per_v".into(), g.poly[1]), ("c2_per_v2".into(), g.poly[2])]),
+        "nonlinear-gain" => m.nonlinear_gain.as_ref().map_or(vec![], |g| {
+            vec![
+                ("c1_per_v".into(), g.poly[1]),
+                ("c2_per_v2".into(), g.poly[2]),
+            ]
+        }),
         "slew-rate-limit" => m
             .slew_rate_limit
             .as_ref()
@@ -172,7 +185,14 @@ pub struct FastSpec {
 /// The search spaces of the fast effects (bounds: what the stage and the model file accept
 /// and what is physically plausible; our assumptions).
 pub fn fast_spec(effect: &str) -> Option<FastSpec> {
-    let s = |effect, lo, hi, log| Some(FastSpec { effect, lo, hi, log });
+    let s = |effect, lo, hi, log| {
+        Some(FastSpec {
+            effect,
+            lo,
+            hi,
+            log,
+        })
+    };
     match effect {
         "time-delay" => s("time-delay", 0.0, params::MAX_DELAY_S, false),
         "amplifier-pole" => s("amplifier-pole", 200.0, 20_000.0, true),
@@ -189,7 +209,12 @@ pub fn with_fast(m: &ModelFile, effect: &str, x: f64, x2: f64) -> ModelFile {
     match effect {
         "time-delay" => m.time_delay = Some(DelaySection { delay_s: x }),
         "amplifier-pole" => m.amplifier_pole = Some(PoleSection { pole_hz: x }),
-        "resonance" => m.resonance = Some(ResonanceSection { mode_hz: x, damping: x2 }),
+        "resonance" => {
+            m.resonance = Some(ResonanceSection {
+                mode_hz: x,
+                damping: x2,
+            })
+        }
         "slew-rate-limit" => m.slew_rate_limit = Some(SlewSection { output_v_per_s: x }),
         "saturation" => {
             m.saturation = Some(SaturationSection {

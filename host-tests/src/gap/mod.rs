@@ -83,14 +83,21 @@ impl Data {
     /// From a parsed record: `y` required, at least [`MIN_SAMPLES`] samples, an input that
     /// moves.
     pub fn from_record(name: &str, rec: Record) -> anyhow::Result<Self> {
-        let y = rec.require_y().with_context(|| format!("record {name}"))?.to_vec();
+        let y = rec
+            .require_y()
+            .with_context(|| format!("record {name}"))?
+            .to_vec();
         let n = rec.len();
         ensure!(
             n >= MIN_SAMPLES,
             "record {name}: {n} samples is too short to show anything (at least {MIN_SAMPLES} are needed)"
         );
         let (lo, hi) = min_max(&rec.u_v);
-        ensure!(hi - lo > 0.05, "record {name}: the input u never moves (span {:.3} V): nothing to compare", hi - lo);
+        ensure!(
+            hi - lo > 0.05,
+            "record {name}: the input u never moves (span {:.3} V): nothing to compare",
+            hi - lo
+        );
         Ok(Self {
             name: name.to_string(),
             t_s: rec.t_s,
@@ -164,6 +171,8 @@ pub struct Diagnosis {
     pub noise_floor_v: f64,
     /// Residual RMS of the final model, volts.
     pub final_rms_v: f64,
+    /// Residual RMS of the final model on each record, volts.
+    pub record_final_rms_v: Vec<f64>,
     /// The base model's simulated outputs.
     pub base_sims: Vec<Vec<f64>>,
     /// The augmented model.
@@ -199,11 +208,25 @@ impl Diagnosis {
             "step", "effect", "rms before", "rms after", "fitted parameters", "evidence"
         ));
         for (i, st) in self.steps.iter().enumerate() {
-            let p: Vec<String> = st.params.iter().map(|(k, v)| format!("{k}={}", fmt_num(v.as_f64().unwrap_or(f64::NAN)))).collect();
+            let p: Vec<String> = st
+                .params
+                .iter()
+                .map(|(k, v)| format!("{k}={}", fmt_num(v.as_f64().unwrap_or(f64::NAN))))
+                .collect();
             s.push_str(&format!(
                 "{:<4} {:<16} {:>9.2} mV {:>9.2} mV  {:<40} {}\n",
                 i + 1,
-                format!("{}{}", st.effect, if st.removed { " (removed)" } else if st.refit { " (refit)" } else { "" }),
+                format!(
+                    "{}{}",
+                    st.effect,
+                    if st.removed {
+                        " (removed)"
+                    } else if st.refit {
+                        " (refit)"
+                    } else {
+                        ""
+                    }
+                ),
                 1e3 * st.rms_before_v,
                 1e3 * st.rms_after_v,
                 p.join(" "),
@@ -223,12 +246,19 @@ impl Diagnosis {
 
 fn fmt_num(v: f64) -> String {
     let a = v.abs();
-    if a != 0.0 && !(1e-2..1e4).contains(&a) { format!("{v:.3e}") } else { format!("{v:.4}") }
+    if a != 0.0 && !(1e-2..1e4).contains(&a) {
+        format!("{v:.3e}")
+    } else {
+        format!("{v:.4}")
+    }
 }
 
 /// Smallest and largest value.
 pub fn min_max(v: &[f64]) -> (f64, f64) {
-    v.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &x| (a.min(x), b.max(x)))
+    v.iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &x| {
+            (a.min(x), b.max(x))
+        })
 }
 
 /// Mean square of `a - b`.
@@ -238,6 +268,7 @@ pub fn mse(a: &[f64], b: &[f64]) -> f64 {
 }
 
 /// Noise floor of a record, volts: robust standard deviation of its second differences.
+#[allow(clippy::needless_range_loop)] // several arrays indexed together
 pub fn noise_floor(d: &Data) -> f64 {
     let n = d.len();
     let settle = (0.01 / d.period_s()).ceil() as usize;
@@ -286,7 +317,10 @@ pub fn sim(model: &ModelFile, d: &Data) -> anyhow::Result<Vec<f64>> {
 
 /// Apply `f` to every item on all cores (`std::thread::scope`), keeping the order.
 pub fn par_map<T: Sync, R: Send>(items: &[T], f: impl Fn(&T) -> R + Sync) -> Vec<R> {
-    let threads = std::thread::available_parallelism().map_or(1, |n| n.get()).min(items.len()).max(1);
+    let threads = std::thread::available_parallelism()
+        .map_or(1, |n| n.get())
+        .min(items.len())
+        .max(1);
     if threads == 1 {
         return items.iter().map(&f).collect();
     }
@@ -314,6 +348,9 @@ pub fn par_map<T: Sync, R: Send>(items: &[T], f: impl Fn(&T) -> R + Sync) -> Vec
     }
     out.into_iter().flatten().collect()
 }
+
+/// A pruning trial: effect, model without it, its simulations and mean squares.
+type Trial = (String, ModelFile, Vec<Vec<f64>>, Vec<f64>);
 
 /// Options of the workflow.
 #[derive(Clone, Debug, Default)]
@@ -345,8 +382,10 @@ pub fn diagnose(base: &ModelFile, data: &[Data], opts: &Options) -> anyhow::Resu
     let bar = if opts.progress {
         let b = indicatif::ProgressBar::new((MAX_STEPS + 1) as u64);
         b.set_style(
-            indicatif::ProgressStyle::with_template("{spinner} [{elapsed_precise}] {bar:30} {pos}/{len} {msg}")
-                .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
+            indicatif::ProgressStyle::with_template(
+                "{spinner} [{elapsed_precise}] {bar:30} {pos}/{len} {msg}",
+            )
+            .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
         );
         b.set_message("simulating the base model");
         Some(b)
@@ -363,9 +402,15 @@ pub fn diagnose(base: &ModelFile, data: &[Data], opts: &Options) -> anyhow::Resu
     let u_range = (ulo.max(-20.0), uhi.min(20.0).max(ulo + 1.0));
 
     let mut model = base.clone();
-    let base_sims: Vec<Vec<f64>> = par_map(data, |d| sim(&model, d)).into_iter().collect::<anyhow::Result<_>>()?;
+    let base_sims: Vec<Vec<f64>> = par_map(data, |d| sim(&model, d))
+        .into_iter()
+        .collect::<anyhow::Result<_>>()?;
     let mut sims = base_sims.clone();
-    let mut cur_mse: Vec<f64> = data.iter().zip(&sims).map(|(d, s)| mse(&d.y_v, s)).collect();
+    let mut cur_mse: Vec<f64> = data
+        .iter()
+        .zip(&sims)
+        .map(|(d, s)| mse(&d.y_v, s))
+        .collect();
     let base_sigs = signatures::compute(data, &sims, &noise);
     let slow_x = slow_regressors(data);
     let mut steps: Vec<Step> = Vec::new();
@@ -376,25 +421,48 @@ pub fn diagnose(base: &ModelFile, data: &[Data], opts: &Options) -> anyhow::Resu
         if let Some(b) = &bar {
             b.inc(1);
         }
-        let at_floor = cur_mse.iter().zip(&var).all(|(m, v)| *m <= STOP_FLOOR_RATIO * STOP_FLOOR_RATIO * v);
+        let at_floor = cur_mse
+            .iter()
+            .zip(&var)
+            .all(|(m, v)| *m <= STOP_FLOOR_RATIO * STOP_FLOOR_RATIO * v);
         if at_floor {
             break;
         }
         let sigs = signatures::compute(data, &sims, &noise);
         if let Some(b) = &bar {
-            b.set_message(format!("step {}: fitting {} candidates", steps.len() + 1, EFFECTS.len()));
+            b.set_message(format!(
+                "step {}: fitting {} candidates",
+                steps.len() + 1,
+                EFFECTS.len()
+            ));
         }
-        let cands = candidates(&model, data, &slow_x, &cur_mse, u_range, sigs.peak_hz, &named)?;
+        let cands = candidates(
+            &model,
+            data,
+            &slow_x,
+            &cur_mse,
+            u_range,
+            sigs.peak_hz,
+            &named,
+        )?;
         // Fast effects are fitted and scored on the fast records (where they show), slow ones
         // on all records; no candidate may make any record's excess worse by > 20 %.
         let fast_set: Vec<usize> = {
             let f: Vec<usize> = (0..data.len()).filter(|&i| data[i].is_fast()).collect();
-            if f.is_empty() { (0..data.len()).collect() } else { f }
+            if f.is_empty() {
+                (0..data.len()).collect()
+            } else {
+                f
+            }
         };
         let all_set: Vec<usize> = (0..data.len()).collect();
         let mut scored = Vec::new();
         for c in cands {
-            let set = if FAST.contains(&c.effect.as_str()) { &fast_set } else { &all_set };
+            let set = if FAST.contains(&c.effect.as_str()) {
+                &fast_set
+            } else {
+                &all_set
+            };
             let n_set: usize = set.iter().map(|&i| data[i].len()).sum();
             let score: f64 = set
                 .iter()
@@ -403,7 +471,11 @@ pub fn diagnose(base: &ModelFile, data: &[Data], opts: &Options) -> anyhow::Resu
                 + catalogue::param_count(&c.effect) as f64 * (n_set as f64).ln();
             let ex = |m: &[f64]| set.iter().map(|&i| (m[i] - var[i]).max(0.0)).sum::<f64>();
             let ex0 = ex(&cur_mse);
-            let explained = if ex0 > 0.0 { 1.0 - ex(&c.mse) / ex0 } else { 0.0 };
+            let explained = if ex0 > 0.0 {
+                1.0 - ex(&c.mse) / ex0
+            } else {
+                0.0
+            };
             let harmless = (0..data.len()).all(|i| {
                 let before = (cur_mse[i] - var[i]).max(0.0);
                 let after = (c.mse[i] - var[i]).max(0.0);
@@ -413,14 +485,18 @@ pub fn diagnose(base: &ModelFile, data: &[Data], opts: &Options) -> anyhow::Resu
             if c.effect == "resonance" {
                 // A resonance is a line: the fitted mode must be lightly damped and sit on a
                 // line of the residual spectrum (within 15 %, 10x the median level).
-                sig_ok &= catalogue::fast_value(&c.model, "resonance").is_some_and(|(f, z)| {
-                    z <= 0.25 && sigs.line_ratio_near(f) >= 10.0
-                });
+                sig_ok &= catalogue::fast_value(&c.model, "resonance")
+                    .is_some_and(|(f, z)| z <= 0.25 && sigs.line_ratio_near(f) >= 10.0);
             }
             let ok = score < 0.0 && explained >= MIN_EXPLAINED && sig_ok && harmless;
             scored.push((c, score, explained, ok));
         }
-        tried.push(scored.iter().map(|(c, s, e, ok)| (c.effect.clone(), *s, *e, *ok)).collect());
+        tried.push(
+            scored
+                .iter()
+                .map(|(c, s, e, ok)| (c.effect.clone(), *s, *e, *ok))
+                .collect(),
+        );
         let Some((best, score, explained, _)) = scored
             .into_iter()
             .filter(|x| x.3)
@@ -468,9 +544,13 @@ pub fn diagnose(base: &ModelFile, data: &[Data], opts: &Options) -> anyhow::Resu
         if let Some(b) = &bar {
             b.set_message("final check of each named effect");
         }
-        let trials = par_map(&named, |e| -> Option<(String, ModelFile, Vec<Vec<f64>>, Vec<f64>)> {
+        let trials = par_map(&named, |e| -> Option<Trial> {
             let m = reverted_refit(&model, base, e, data, &slow_x, u_range)?;
-            let s: Vec<Vec<f64>> = data.iter().map(|d| sim(&m, d)).collect::<anyhow::Result<_>>().ok()?;
+            let s: Vec<Vec<f64>> = data
+                .iter()
+                .map(|d| sim(&m, d))
+                .collect::<anyhow::Result<_>>()
+                .ok()?;
             let ms = data.iter().zip(&s).map(|(d, y)| mse(&d.y_v, y)).collect();
             Some((e.clone(), m, s, ms))
         });
@@ -492,10 +572,13 @@ pub fn diagnose(base: &ModelFile, data: &[Data], opts: &Options) -> anyhow::Resu
             })
             // The effect furthest below its own bar.
             .min_by(|a, b| {
-                let bar = |e: &str| PRUNE_RATIO + PRUNE_PER_PARAM * catalogue::param_count(e) as f64;
+                let bar =
+                    |e: &str| PRUNE_RATIO + PRUNE_PER_PARAM * catalogue::param_count(e) as f64;
                 (a.4 / bar(&a.0)).total_cmp(&(b.4 / bar(&b.0)))
             });
-        let Some((e, m, s, ms, ratio)) = weakest else { break };
+        let Some((e, m, s, ms, ratio)) = weakest else {
+            break;
+        };
         let bar_e = PRUNE_RATIO + PRUNE_PER_PARAM * catalogue::param_count(&e) as f64;
         if ratio >= bar_e {
             break;
@@ -532,6 +615,7 @@ pub fn diagnose(base: &ModelFile, data: &[Data], opts: &Options) -> anyhow::Resu
         record_noise_v: noise,
         noise_floor_v,
         final_rms_v,
+        record_final_rms_v: cur_mse.iter().map(|m| m.sqrt()).collect(),
         base_sims,
         model,
         tried,
@@ -549,12 +633,20 @@ fn reverted_refit(
     u_range: (f64, f64),
 ) -> Option<ModelFile> {
     let m = catalogue::revert(model, base, effect);
-    let set: Vec<&str> = SLOW.iter().copied().filter(|e| catalogue::present(&m, e)).collect();
+    let set: Vec<&str> = SLOW
+        .iter()
+        .copied()
+        .filter(|e| catalogue::present(&m, e))
+        .collect();
     if set.is_empty() {
         return Some(m);
     }
     let b0 = catalogue::without_slow(&m);
-    let y0: Vec<Vec<f64>> = data.iter().map(|d| sim(&b0, d)).collect::<anyhow::Result<_>>().ok()?;
+    let y0: Vec<Vec<f64>> = data
+        .iter()
+        .map(|d| sim(&b0, d))
+        .collect::<anyhow::Result<_>>()
+        .ok()?;
     let p = fit_slow(data, &y0, slow_x, &set)?;
     catalogue::with_slow(&m, &p, u_range)
 }
@@ -570,9 +662,15 @@ fn candidates(
     named: &[String],
 ) -> anyhow::Result<Vec<Candidate>> {
     // Slow effects: one joint solve per candidate set.
-    let present_slow: Vec<&str> = SLOW.iter().copied().filter(|e| catalogue::present(model, e)).collect();
+    let present_slow: Vec<&str> = SLOW
+        .iter()
+        .copied()
+        .filter(|e| catalogue::present(model, e))
+        .collect();
     let base0 = catalogue::without_slow(model);
-    let y0: Vec<Vec<f64>> = par_map(data, |d| sim(&base0, d)).into_iter().collect::<anyhow::Result<_>>()?;
+    let y0: Vec<Vec<f64>> = par_map(data, |d| sim(&base0, d))
+        .into_iter()
+        .collect::<anyhow::Result<_>>()?;
     let mut jobs: Vec<(String, bool, ModelFile)> = Vec::new();
     let mut sets: Vec<(String, bool, Vec<&str>)> = SLOW
         .iter()
@@ -588,48 +686,53 @@ fn candidates(
     }
     let mut refit_done: Option<ModelFile> = None;
     for (effect, refit, set) in sets {
-        if refit {
-            if let Some(m) = &refit_done {
-                jobs.push((effect, true, m.clone()));
-                continue;
-            }
+        if refit && let Some(m) = &refit_done {
+            jobs.push((effect, true, m.clone()));
+            continue;
         }
-        if let Some(p) = fit_slow(data, &y0, slow_x, &set) {
-            if let Some(m) = catalogue::with_slow(model, &p, u_range) {
-                if refit {
-                    refit_done = Some(m.clone());
-                }
-                jobs.push((effect, refit, m));
+        if let Some(p) = fit_slow(data, &y0, slow_x, &set)
+            && let Some(m) = catalogue::with_slow(model, &p, u_range)
+        {
+            if refit {
+                refit_done = Some(m.clone());
             }
+            jobs.push((effect, refit, m));
         }
     }
     // Fast effects: bounded search on the fast records.
     let fast_idx: Vec<usize> = {
         let f: Vec<usize> = (0..data.len()).filter(|&i| data[i].is_fast()).collect();
-        if f.is_empty() { (0..data.len()).collect() } else { f }
+        if f.is_empty() {
+            (0..data.len()).collect()
+        } else {
+            f
+        }
     };
     let fast_fits: Vec<Option<(String, bool, ModelFile, f64)>> = par_map(&FAST, |e| {
         let refit = catalogue::present(model, e);
         // Coordinate descent: the candidate, then the fast effects already named, then the
         // candidate again (fast effects compensate each other: a slew limit mimics a delay).
         let (mut m, mut cost) = fit_fast(model, data, &fast_idx, e, peak_hz)?;
-        let others: Vec<&String> = named.iter().filter(|n| n.as_str() != *e && FAST.contains(&n.as_str())).collect();
+        let others: Vec<&String> = named
+            .iter()
+            .filter(|n| n.as_str() != *e && FAST.contains(&n.as_str()))
+            .collect();
         for _pass in 0..4 {
             if others.is_empty() {
                 break;
             }
             let start = cost;
             for o in &others {
-                if let Some((m2, c2)) = fit_fast(&m, data, &fast_idx, o, peak_hz) {
-                    if c2 < cost {
-                        (m, cost) = (m2, c2);
-                    }
-                }
-            }
-            if let Some((m2, c2)) = fit_fast(&m, data, &fast_idx, e, peak_hz) {
-                if c2 < cost {
+                if let Some((m2, c2)) = fit_fast(&m, data, &fast_idx, o, peak_hz)
+                    && c2 < cost
+                {
                     (m, cost) = (m2, c2);
                 }
+            }
+            if let Some((m2, c2)) = fit_fast(&m, data, &fast_idx, e, peak_hz)
+                && c2 < cost
+            {
+                (m, cost) = (m2, c2);
             }
             // Costs are sums of n ln MSE: stop when a pass gains less than 2 % of MSE.
             let n_fast: f64 = fast_idx.iter().map(|&i| data[i].len() as f64).sum();
@@ -639,7 +742,10 @@ fn candidates(
         }
         Some((e.to_string(), refit, m, cost))
     });
-    let cur_fast_cost: f64 = fast_idx.iter().map(|&i| data[i].len() as f64 * cur_mse[i].max(1e-14).ln()).sum();
+    let cur_fast_cost: f64 = fast_idx
+        .iter()
+        .map(|&i| data[i].len() as f64 * cur_mse[i].max(1e-14).ln())
+        .sum();
     for (effect, refit, m, cost) in fast_fits.into_iter().flatten() {
         // Simulate in full only what helps on the fast records (10 % of their MSE at least).
         let n_fast: f64 = fast_idx.iter().map(|&i| data[i].len() as f64).sum();
@@ -648,8 +754,15 @@ fn candidates(
         }
     }
     let results = par_map(&jobs, |(effect, refit, m)| -> anyhow::Result<Candidate> {
-        let sims: Vec<Vec<f64>> = data.iter().map(|d| sim(m, d)).collect::<anyhow::Result<_>>()?;
-        let mse_v = data.iter().zip(&sims).map(|(d, s)| mse(&d.y_v, s)).collect();
+        let sims: Vec<Vec<f64>> = data
+            .iter()
+            .map(|d| sim(m, d))
+            .collect::<anyhow::Result<_>>()?;
+        let mse_v = data
+            .iter()
+            .zip(&sims)
+            .map(|(d, s)| mse(&d.y_v, s))
+            .collect();
         let k = catalogue::param_count(effect);
         Ok(Candidate {
             effect: effect.clone(),
@@ -665,7 +778,13 @@ fn candidates(
 
 /// Fit a fast effect on the fast records: returns the model and its cost
 /// `sum n_r ln MSE_r` over those records.
-fn fit_fast(model: &ModelFile, data: &[Data], idx: &[usize], effect: &str, peak_hz: f64) -> Option<(ModelFile, f64)> {
+fn fit_fast(
+    model: &ModelFile,
+    data: &[Data],
+    idx: &[usize],
+    effect: &str,
+    peak_hz: f64,
+) -> Option<(ModelFile, f64)> {
     let spec = catalogue::fast_spec(effect)?;
     let cost = |m: &ModelFile| -> f64 {
         let mut c = 0.0;
@@ -684,9 +803,15 @@ fn fit_fast(model: &ModelFile, data: &[Data], idx: &[usize], effect: &str, peak_
     let mut z = if effect == "resonance" { z0 } else { 0.0 };
     let grid = if effect == "resonance" { 32 } else { 16 };
     let mut best = (f64::INFINITY, a);
-    let zs: Vec<f64> = if effect == "resonance" { vec![0.02, 0.06, 0.15] } else { vec![z] };
+    let zs: Vec<f64> = if effect == "resonance" {
+        vec![0.02, 0.06, 0.15]
+    } else {
+        vec![z]
+    };
     // The grid, plus (resonance) the residual's spectral line: localisation in frequency.
-    let mut xs: Vec<f64> = (0..=grid).map(|g| a + (b - a) * g as f64 / grid as f64).collect();
+    let mut xs: Vec<f64> = (0..=grid)
+        .map(|g| a + (b - a) * g as f64 / grid as f64)
+        .collect();
     if effect == "resonance" && peak_hz > spec.lo && peak_hz < spec.hi {
         for f in [0.88, 0.94, 1.0, 1.06, 1.12] {
             xs.push(to((f * peak_hz).clamp(spec.lo, spec.hi)));
@@ -709,12 +834,18 @@ fn fit_fast(model: &ModelFile, data: &[Data], idx: &[usize], effect: &str, peak_
         }
     }
     let h = (b - a) / grid as f64;
-    let x = golden(best.1 - h, best.1 + h, a, b, |x| cost(&catalogue::with_fast(model, effect, from(x), z)));
+    let x = golden(best.1 - h, best.1 + h, a, b, |x| {
+        cost(&catalogue::with_fast(model, effect, from(x), z))
+    });
     let mut xbest = from(x);
     if effect == "resonance" {
-        let lz = golden((z / 3.0).ln(), (z * 3.0).ln(), (0.005f64).ln(), (0.5f64).ln(), |lz| {
-            cost(&catalogue::with_fast(model, effect, xbest, lz.exp()))
-        });
+        let lz = golden(
+            (z / 3.0).ln(),
+            (z * 3.0).ln(),
+            (0.005f64).ln(),
+            (0.5f64).ln(),
+            |lz| cost(&catalogue::with_fast(model, effect, xbest, lz.exp())),
+        );
         z = lz.exp();
         let x2 = golden(to(xbest) - h / 2.0, to(xbest) + h / 2.0, a, b, |x| {
             cost(&catalogue::with_fast(model, effect, from(x), z))
@@ -765,6 +896,7 @@ const COL_PLAY: usize = N_TAU;
 const COL_GAIN: usize = N_TAU + N_PLAY;
 const N_COLS: usize = N_TAU + N_PLAY + 2;
 
+#[allow(clippy::needless_range_loop)] // several arrays indexed together
 fn slow_regressors(data: &[Data]) -> SlowRegressors {
     let mut cols = Vec::new();
     let mut mask = Vec::new();
@@ -796,7 +928,12 @@ fn slow_regressors(data: &[Data]) -> SlowRegressors {
             );
         }
         c.push(d.u_v.iter().map(|u| params::PLANT_GAIN * u * u).collect());
-        c.push(d.u_v.iter().map(|u| params::PLANT_GAIN * u * u * u).collect());
+        c.push(
+            d.u_v
+                .iter()
+                .map(|u| params::PLANT_GAIN * u * u * u)
+                .collect(),
+        );
         // Settled: no input jump (> 20 mV) within SETTLE_S before.
         let settle = (SETTLE_S / t).ceil() as usize;
         let mut m = vec![true; n];
@@ -805,10 +942,10 @@ fn slow_regressors(data: &[Data]) -> SlowRegressors {
             if i > 0 && (d.u_v[i] - d.u_v[i - 1]).abs() > 0.02 {
                 last_jump = Some(i);
             }
-            if let Some(j) = last_jump {
-                if i - j <= settle {
-                    m[i] = false;
-                }
+            if let Some(j) = last_jump
+                && i - j <= settle
+            {
+                m[i] = false;
             }
         }
         cols.push(c);
@@ -820,7 +957,12 @@ fn slow_regressors(data: &[Data]) -> SlowRegressors {
 /// The joint weighted least-squares fit of the slow effects in `set` to the residual of the
 /// model without slow effects (`y0`). Records weigh equally. Drift time constants: the best
 /// three of the grid.
-fn fit_slow(data: &[Data], y0: &[Vec<f64>], x: &SlowRegressors, set: &[&str]) -> Option<SlowParams> {
+fn fit_slow(
+    data: &[Data],
+    y0: &[Vec<f64>],
+    x: &SlowRegressors,
+    set: &[&str],
+) -> Option<SlowParams> {
     // Gram matrix of all columns and the target.
     let mut g = DMatrix::<f64>::zeros(N_COLS, N_COLS);
     let mut b = DVector::<f64>::zeros(N_COLS);
@@ -874,7 +1016,9 @@ fn fit_slow(data: &[Data], y0: &[Vec<f64>], x: &SlowRegressors, set: &[&str]) ->
         let beta = a.clone().cholesky()?.solve(&v);
         // Reduction of the weighted SSR.
         let red = beta.dot(&v);
-        beta.iter().all(|x| x.is_finite()).then(|| (beta.iter().copied().collect(), red))
+        beta.iter()
+            .all(|x| x.is_finite())
+            .then(|| (beta.iter().copied().collect(), red))
     };
     let mut fixed: Vec<usize> = Vec::new();
     if set.contains(&"hysteresis") {
@@ -884,12 +1028,21 @@ fn fit_slow(data: &[Data], y0: &[Vec<f64>], x: &SlowRegressors, set: &[&str]) ->
         fixed.extend([COL_GAIN, COL_GAIN + 1]);
     }
     let unpack = |idx: &[usize], beta: &[f64], taus: Option<[usize; 3]>| -> SlowParams {
-        let get = |k: usize| idx.iter().position(|&c| c == k).and_then(|p| beta.get(p).copied()).unwrap_or(0.0);
+        let get = |k: usize| {
+            idx.iter()
+                .position(|&c| c == k)
+                .and_then(|p| beta.get(p).copied())
+                .unwrap_or(0.0)
+        };
         SlowParams {
             drift: taus.map(|t| {
                 (
                     [get(t[0]), get(t[1]), get(t[2])],
-                    [catalogue::DRIFT_TAU_GRID_S[t[0]], catalogue::DRIFT_TAU_GRID_S[t[1]], catalogue::DRIFT_TAU_GRID_S[t[2]]],
+                    [
+                        catalogue::DRIFT_TAU_GRID_S[t[0]],
+                        catalogue::DRIFT_TAU_GRID_S[t[1]],
+                        catalogue::DRIFT_TAU_GRID_S[t[2]],
+                    ],
                 )
             }),
             hysteresis: set.contains(&"hysteresis").then(|| {
@@ -899,7 +1052,9 @@ fn fit_slow(data: &[Data], y0: &[Vec<f64>], x: &SlowRegressors, set: &[&str]) ->
                 }
                 w
             }),
-            gain: set.contains(&"nonlinear-gain").then(|| (get(COL_GAIN), get(COL_GAIN + 1))),
+            gain: set
+                .contains(&"nonlinear-gain")
+                .then(|| (get(COL_GAIN), get(COL_GAIN + 1))),
         }
     };
     if set.contains(&"drift") {
@@ -925,13 +1080,25 @@ fn fit_slow(data: &[Data], y0: &[Vec<f64>], x: &SlowRegressors, set: &[&str]) ->
         let mut taus = ti.map(|i| grid[i]);
         let eval = |taus: &[f64; 3]| -> f64 {
             solve_drift(data, y0, x, taus, &fixed).map_or(f64::NEG_INFINITY, |(beta, red)| {
-                if beta.iter().take(3).all(|g| g.abs() <= 1.0) { red } else { f64::NEG_INFINITY }
+                if beta.iter().take(3).all(|g| g.abs() <= 1.0) {
+                    red
+                } else {
+                    f64::NEG_INFINITY
+                }
             })
         };
         for _pass in 0..2 {
             for m in 0..3 {
-                let lo = if m > 0 { taus[m - 1] * 1.05 } else { grid[0] * 0.5 };
-                let hi = if m < 2 { taus[m + 1] / 1.05 } else { grid[N_TAU - 1] * 2.0 };
+                let lo = if m > 0 {
+                    taus[m - 1] * 1.05
+                } else {
+                    grid[0] * 0.5
+                };
+                let hi = if m < 2 {
+                    taus[m + 1] / 1.05
+                } else {
+                    grid[N_TAU - 1] * 2.0
+                };
                 if !(lo < hi) {
                     continue;
                 }
@@ -971,7 +1138,13 @@ fn fit_slow(data: &[Data], y0: &[Vec<f64>], x: &SlowRegressors, set: &[&str]) ->
 
 /// The weighted solve with three drift lags of time constants `taus` (computed here) and the
 /// regressor columns `fixed`: (coefficients, drift first; reduction of the weighted SSR).
-fn solve_drift(data: &[Data], y0: &[Vec<f64>], x: &SlowRegressors, taus: &[f64; 3], fixed: &[usize]) -> Option<(Vec<f64>, f64)> {
+fn solve_drift(
+    data: &[Data],
+    y0: &[Vec<f64>],
+    x: &SlowRegressors,
+    taus: &[f64; 3],
+    fixed: &[usize],
+) -> Option<(Vec<f64>, f64)> {
     let p = 3 + fixed.len();
     let mut g = DMatrix::<f64>::zeros(p, p);
     let mut b = DVector::<f64>::zeros(p);
@@ -1020,7 +1193,9 @@ fn solve_drift(data: &[Data], y0: &[Vec<f64>], x: &SlowRegressors, taus: &[f64; 
     }
     let beta = g.cholesky()?.solve(&b);
     let red = beta.dot(&b);
-    beta.iter().all(|v| v.is_finite()).then(|| (beta.iter().copied().collect(), red))
+    beta.iter()
+        .all(|v| v.is_finite())
+        .then(|| (beta.iter().copied().collect(), red))
 }
 
 /// Read the records named on the command line: CSV or MATLAB v5 `.mat` (with `vars`).
@@ -1030,7 +1205,10 @@ pub fn load_data(paths: &[std::path::PathBuf], vars: Option<&str>) -> anyhow::Re
     }
     let mut out = Vec::new();
     for p in paths {
-        let name = p.file_name().map_or_else(|| p.display().to_string(), |s| s.to_string_lossy().into_owned());
+        let name = p.file_name().map_or_else(
+            || p.display().to_string(),
+            |s| s.to_string_lossy().into_owned(),
+        );
         let is_mat = p.extension().is_some_and(|e| e.eq_ignore_ascii_case("mat"));
         let rec = if is_mat {
             crate::mat::read_record(p, vars.unwrap_or("t=t,u=u,y=y"))?

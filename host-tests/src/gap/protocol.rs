@@ -58,9 +58,20 @@ pub fn slow_input(rate_hz: f64, seconds: f64) -> (Vec<f64>, Vec<f64>) {
                 levels[(((x - 0.5) / hold) as usize).min(3)]
             } else if x < sine_start {
                 // 5 -> 0 -> 10 -> 0 -> 10 -> 5 V, piecewise linear.
-                let pts = [(0.0, 5.0), (0.125, 0.0), (0.375, 10.0), (0.625, 0.0), (0.875, 10.0), (1.0, 5.0)];
+                let pts = [
+                    (0.0, 5.0),
+                    (0.125, 0.0),
+                    (0.375, 10.0),
+                    (0.625, 0.0),
+                    (0.875, 10.0),
+                    (1.0, 5.0),
+                ];
                 let p = (x - tt / 2.0) / (sine_start - tt / 2.0);
-                let k = pts.iter().rposition(|q| q.0 <= p).unwrap_or(0).min(pts.len() - 2);
+                let k = pts
+                    .iter()
+                    .rposition(|q| q.0 <= p)
+                    .unwrap_or(0)
+                    .min(pts.len() - 2);
                 let (p0, u0) = pts[k];
                 let (p1, u1) = pts[k + 1];
                 u0 + (u1 - u0) * (p - p0) / (p1 - p0)
@@ -73,4 +84,43 @@ pub fn slow_input(rate_hz: f64, seconds: f64) -> (Vec<f64>, Vec<f64>) {
         .map(|u: f64| u.clamp(0.0, 10.0))
         .collect();
     (t, u)
+}
+
+/// `piezo synth --protocol identification --output FILE.csv`: writes `FILE-fast.csv` (50 kHz,
+/// 0.2 s) and `FILE-slow.csv` (1 kHz, `--seconds` long, at least 20 s) from the model, with its
+/// noise (or `--noise-v`) and `--seed`.
+pub fn synth_identification(a: &crate::synth::SynthArgs) -> anyhow::Result<()> {
+    use crate::model_file::ModelFile;
+    use crate::record::Record;
+    anyhow::ensure!(
+        a.seconds.is_finite() && (20.0..=3600.0).contains(&a.seconds.max(20.0)),
+        "--seconds (the slow record's length) must be within 20..3600 s"
+    );
+    let mut model = ModelFile::load(&a.model)?;
+    model.converters.seed = a.seed;
+    if let Some(n) = a.noise_v {
+        anyhow::ensure!(
+            n.is_finite() && (0.0..=1.0).contains(&n),
+            "--noise-v must be within 0..1 V"
+        );
+        model.converters.noise_v = n;
+    }
+    let stage = model.build_stage()?;
+    let stem = a.output.with_extension("");
+    let slow_s = a.seconds.max(20.0);
+    for (tag, (t, u)) in [
+        ("fast", fast_input(50_000.0, 0.2)),
+        ("slow", slow_input(1_000.0, slow_s)),
+    ] {
+        let y = crate::simulate::simulate(&stage, model.period_s, &t, &u);
+        let rec = Record::new(t, u, Some(y), None)?;
+        let path = std::path::PathBuf::from(format!("{}-{tag}.csv", stem.display()));
+        rec.write(&path)?;
+        eprintln!(
+            "wrote {} samples ({tag} record) to {}",
+            rec.len(),
+            path.display()
+        );
+    }
+    Ok(())
 }

@@ -30,7 +30,9 @@ fn thin(v: Vec<(f64, f64)>, max: usize) -> Vec<(f64, f64)> {
         return v;
     }
     let step = v.len() as f64 / max as f64;
-    (0..max).filter_map(|i| v.get((i as f64 * step) as usize).copied()).collect()
+    (0..max)
+        .filter_map(|i| v.get((i as f64 * step) as usize).copied())
+        .collect()
 }
 
 /// A line (or point) plot as an SVG string.
@@ -40,7 +42,12 @@ fn plot(title: &str, xl: &str, yl: &str, series: &[Series], points: bool, log_y:
         let root = SVGBackend::with_string(&mut svg, (760, 330)).into_drawing_area();
         root.fill(&WHITE)?;
         let all = series.iter().flat_map(|s| s.1.iter());
-        let (mut x0, mut x1, mut y0, mut y1) = (f64::INFINITY, f64::NEG_INFINITY, f64::INFINITY, f64::NEG_INFINITY);
+        let (mut x0, mut x1, mut y0, mut y1) = (
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+        );
         for &(x, y) in all {
             if x.is_finite() && y.is_finite() && (!log_y || y > 0.0) {
                 x0 = x0.min(x);
@@ -60,17 +67,26 @@ fn plot(title: &str, xl: &str, yl: &str, series: &[Series], points: bool, log_y:
         }
         let pad = 0.05 * (y1 - y0);
         let mut b = ChartBuilder::on(&root);
-        b.caption(title, ("sans-serif", 16)).margin(8).x_label_area_size(36).y_label_area_size(64);
+        b.caption(title, ("sans-serif", 16))
+            .margin(8)
+            .x_label_area_size(36)
+            .y_label_area_size(64);
         if log_y {
             let mut c = b.build_cartesian_2d(x0..x1, (y0.max(1e-9)..y1 * 1.5).log_scale())?;
             c.configure_mesh().x_desc(xl).y_desc(yl).draw()?;
             for (i, (name, pts)) in series.iter().enumerate() {
                 let col = COLORS[i % COLORS.len()];
-                c.draw_series(LineSeries::new(pts.iter().copied().filter(|p| p.1 > 0.0), col.stroke_width(1)))?
-                    .label(name.as_str())
-                    .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 16, y)], col));
+                c.draw_series(LineSeries::new(
+                    pts.iter().copied().filter(|p| p.1 > 0.0),
+                    col.stroke_width(1),
+                ))?
+                .label(name.as_str())
+                .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 16, y)], col));
             }
-            c.configure_series_labels().background_style(WHITE.mix(0.8)).border_style(BLACK).draw()?;
+            c.configure_series_labels()
+                .background_style(WHITE.mix(0.8))
+                .border_style(BLACK)
+                .draw()?;
         } else {
             let mut c = b.build_cartesian_2d(x0..x1, (y0 - pad)..(y1 + pad))?;
             c.configure_mesh().x_desc(xl).y_desc(yl).draw()?;
@@ -86,7 +102,10 @@ fn plot(title: &str, xl: &str, yl: &str, series: &[Series], points: bool, log_y:
                         .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 16, y)], col));
                 }
             }
-            c.configure_series_labels().background_style(WHITE.mix(0.8)).border_style(BLACK).draw()?;
+            c.configure_series_labels()
+                .background_style(WHITE.mix(0.8))
+                .border_style(BLACK)
+                .draw()?;
         }
         root.present()?;
         Ok(())
@@ -98,7 +117,9 @@ fn plot(title: &str, xl: &str, yl: &str, series: &[Series], points: bool, log_y:
 }
 
 fn esc(s: &str) -> String {
-    s.replace('&', "&amp;").replace('<', "&lt;").replace('>', "&gt;")
+    s.replace('&', "&amp;")
+        .replace('<', "&lt;")
+        .replace('>', "&gt;")
 }
 
 /// Write `dir/index.html`.
@@ -125,7 +146,13 @@ pub fn write(dir: &Path, base: &ModelFile, data: &[Data], d: &Diagnosis) -> anyh
             "<tr><td>{}</td><td>{}{}</td><td>{}</td><td>{}</td><td>{:.2} mV</td><td>{:.2} mV</td></tr>",
             i + 1,
             esc(&s.effect),
-            if s.removed { " (removed)" } else if s.refit { " (refit)" } else { "" },
+            if s.removed {
+                " (removed)"
+            } else if s.refit {
+                " (refit)"
+            } else {
+                ""
+            },
             esc(&s.evidence),
             esc(&p.join(", ")),
             1e3 * s.rms_before_v,
@@ -138,7 +165,12 @@ pub fn write(dir: &Path, base: &ModelFile, data: &[Data], d: &Diagnosis) -> anyh
         .collect();
     h.push_str("<h2>Measured and simulated</h2><div class=\"row\">");
     for (r, rec) in data.iter().enumerate() {
-        let pts = |v: &[f64]| thin(rec.t_s.iter().copied().zip(v.iter().copied()).collect(), 3000);
+        let pts = |v: &[f64]| {
+            thin(
+                rec.t_s.iter().copied().zip(v.iter().copied()).collect(),
+                3000,
+            )
+        };
         h.push_str(&plot(
             &format!("{}: measured and simulated", rec.name),
             "t (s)",
@@ -156,7 +188,11 @@ pub fn write(dir: &Path, base: &ModelFile, data: &[Data], d: &Diagnosis) -> anyh
     for (r, rec) in data.iter().enumerate() {
         let res = |s: &[f64]| {
             thin(
-                rec.t_s.iter().zip(rec.y_v.iter().zip(s)).map(|(t, (y, m))| (*t, 1e3 * (y - m))).collect(),
+                rec.t_s
+                    .iter()
+                    .zip(rec.y_v.iter().zip(s))
+                    .map(|(t, (y, m))| (*t, 1e3 * (y - m)))
+                    .collect(),
                 3000,
             )
         };
@@ -164,15 +200,33 @@ pub fn write(dir: &Path, base: &ModelFile, data: &[Data], d: &Diagnosis) -> anyh
         for (i, s) in d.steps.iter().enumerate() {
             series.push((format!("after {}: {}", i + 1, s.effect), res(&s.sims[r])));
         }
-        h.push_str(&plot(&format!("{}: residual", rec.name), "t (s)", "residual (mV)", &series, false, false));
+        h.push_str(&plot(
+            &format!("{}: residual", rec.name),
+            "t (s)",
+            "residual (mV)",
+            &series,
+            false,
+            false,
+        ));
     }
     h.push_str("</div><h2>Evidence (base model's residual)</h2><div class=\"row\">");
     // Residual against input (loop), static curve and tails, on the slow records.
     for (r, rec) in data.iter().enumerate().filter(|(_, x)| !x.is_fast()) {
-        let res: Vec<f64> = rec.y_v.iter().zip(&d.base_sims[r]).map(|(y, m)| 1e3 * (y - m)).collect();
-        let loop_pts = thin(rec.u_v.iter().copied().zip(res.iter().copied()).collect(), 4000);
+        let res: Vec<f64> = rec
+            .y_v
+            .iter()
+            .zip(&d.base_sims[r])
+            .map(|(y, m)| 1e3 * (y - m))
+            .collect();
+        let loop_pts = thin(
+            rec.u_v.iter().copied().zip(res.iter().copied()).collect(),
+            4000,
+        );
         h.push_str(&plot(
-            &format!("{}: residual against input (hysteresis loop, gain curve)", rec.name),
+            &format!(
+                "{}: residual against input (hysteresis loop, gain curve)",
+                rec.name
+            ),
             "u (V)",
             "residual (mV)",
             &[("residual".into(), loop_pts)],
@@ -190,7 +244,9 @@ pub fn write(dir: &Path, base: &ModelFile, data: &[Data], d: &Diagnosis) -> anyh
                 i += 1;
             }
             if (i - s) as f64 * t >= 0.2 && tails.len() < 6 {
-                let pts: Vec<(f64, f64)> = (s..i).map(|k| ((k - s) as f64 * t, res[k] - res[s.min(n - 1)])).collect();
+                let pts: Vec<(f64, f64)> = (s..i)
+                    .map(|k| ((k - s) as f64 * t, res[k] - res[s.min(n - 1)]))
+                    .collect();
                 tails.push((format!("hold at {:.2} V", rec.u_v[s]), thin(pts, 1500)));
             }
             i += 1;
@@ -208,9 +264,18 @@ pub fn write(dir: &Path, base: &ModelFile, data: &[Data], d: &Diagnosis) -> anyh
     }
     for (r, rec) in data.iter().enumerate().filter(|(_, x)| x.is_fast()).take(1) {
         let n = rec.len().min((0.03 / rec.period_s()) as usize);
-        let pts = |v: &[f64]| rec.t_s[..n].iter().copied().zip(v[..n].iter().copied()).collect::<Vec<_>>();
+        let pts = |v: &[f64]| {
+            rec.t_s[..n]
+                .iter()
+                .copied()
+                .zip(v[..n].iter().copied())
+                .collect::<Vec<_>>()
+        };
         h.push_str(&plot(
-            &format!("{}: first step edges (delay, pole, slew, ringing)", rec.name),
+            &format!(
+                "{}: first step edges (delay, pole, slew, ringing)",
+                rec.name
+            ),
             "t (s)",
             "y (V)",
             &[
@@ -223,7 +288,12 @@ pub fn write(dir: &Path, base: &ModelFile, data: &[Data], d: &Diagnosis) -> anyh
         ));
     }
     if !d.signatures.spectrum.is_empty() {
-        let pts: Vec<(f64, f64)> = d.signatures.spectrum.iter().map(|(f, a)| (*f, *a * 1e3)).collect();
+        let pts: Vec<(f64, f64)> = d
+            .signatures
+            .spectrum
+            .iter()
+            .map(|(f, a)| (*f, *a * 1e3))
+            .collect();
         h.push_str(&plot(
             "residual spectrum of the fast record (base model)",
             "f (Hz)",
@@ -237,11 +307,23 @@ pub fn write(dir: &Path, base: &ModelFile, data: &[Data], d: &Diagnosis) -> anyh
     for (i, t) in d.tried.iter().enumerate() {
         let _ = write!(h, "<p>step {}: ", i + 1);
         for (e, s, x, ok) in t {
-            let _ = write!(h, "{} (score {:.0}, explains {:.0} %{}); ", esc(e), s, 100.0 * x, if *ok { "" } else { ", not admissible" });
+            let _ = write!(
+                h,
+                "{} (score {:.0}, explains {:.0} %{}); ",
+                esc(e),
+                s,
+                100.0 * x,
+                if *ok { "" } else { ", not admissible" }
+            );
         }
         h.push_str("</p>");
     }
-    let _ = write!(h, "<h2>Augmented model</h2><pre>{}</pre></body></html>", esc(&d.model.to_toml().unwrap_or_default()));
-    std::fs::write(dir.join("index.html"), h).with_context(|| format!("cannot write {}", dir.join("index.html").display()))?;
+    let _ = write!(
+        h,
+        "<h2>Augmented model</h2><pre>{}</pre></body></html>",
+        esc(&d.model.to_toml().unwrap_or_default())
+    );
+    std::fs::write(dir.join("index.html"), h)
+        .with_context(|| format!("cannot write {}", dir.join("index.html").display()))?;
     Ok(())
 }

@@ -43,6 +43,7 @@ pub struct Signatures {
 }
 
 /// The signatures of the residuals `y - sims`.
+#[allow(clippy::needless_range_loop)] // several arrays indexed together
 pub fn compute(data: &[Data], sims: &[Vec<f64>], noise: &[f64]) -> Signatures {
     let mut s = Signatures {
         noise_v: (noise.iter().map(|x| x * x).sum::<f64>() / noise.len().max(1) as f64).sqrt(),
@@ -176,14 +177,19 @@ fn spectrum_peak(r: &[f64], t: f64) -> (f64, f64, Vec<(f64, f64)>) {
         .collect();
     FftPlanner::new().plan_fft_forward(n).process(&mut buf);
     let df = 1.0 / (n as f64 * t);
-    let spec: Vec<(f64, f64)> = (1..n / 2).map(|k| (k as f64 * df, 4.0 * buf[k].norm() / n as f64)).collect();
+    let spec: Vec<(f64, f64)> = (1..n / 2)
+        .map(|k| (k as f64 * df, 4.0 * buf[k].norm() / n as f64))
+        .collect();
     let hi: Vec<&(f64, f64)> = spec.iter().filter(|(f, _)| *f >= 500.0).collect();
     if hi.is_empty() {
         return (0.0, 0.0, spec);
     }
     let mut mags: Vec<f64> = hi.iter().map(|x| x.1).collect();
     let med = super::median_pub(&mut mags).max(1e-15);
-    let (f, a) = hi.iter().fold((0.0, 0.0), |acc, x| if x.1 > acc.1 { (x.0, x.1) } else { acc });
+    let (f, a) = hi.iter().fold(
+        (0.0, 0.0),
+        |acc, x| if x.1 > acc.1 { (x.0, x.1) } else { acc },
+    );
     (f, a / med, spec)
 }
 
@@ -191,7 +197,12 @@ impl Signatures {
     /// Height of the residual spectrum near `f_hz` (within 15 %) over its median level above
     /// 500 Hz: is there a line where a fitted mode sits?
     pub fn line_ratio_near(&self, f_hz: f64) -> f64 {
-        let mut mags: Vec<f64> = self.spectrum.iter().filter(|(f, _)| *f >= 500.0).map(|x| x.1).collect();
+        let mut mags: Vec<f64> = self
+            .spectrum
+            .iter()
+            .filter(|(f, _)| *f >= 500.0)
+            .map(|x| x.1)
+            .collect();
         let med = super::median_pub(&mut mags).max(1e-15);
         let near = self
             .spectrum
@@ -225,8 +236,14 @@ impl Signatures {
                 self.peak_hz, self.peak_ratio
             ),
             "drift" => format!("tails after steps up to {} during holds", mv(self.tail_v)),
-            "hysteresis" => format!("residual differs by up to {} between rising and falling input", mv(self.loop_v)),
-            "nonlinear-gain" => format!("static residual curves by {} against the input", mv(self.curve_v)),
+            "hysteresis" => format!(
+                "residual differs by up to {} between rising and falling input",
+                mv(self.loop_v)
+            ),
+            "nonlinear-gain" => format!(
+                "static residual curves by {} against the input",
+                mv(self.curve_v)
+            ),
             "saturation" => format!(
                 "input spans {:.2}..{:.2} V, near the amplifier's limits",
                 self.u_span_v.0, self.u_span_v.1
