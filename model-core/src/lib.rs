@@ -20,6 +20,7 @@
 //! * [`limits`]: window, slew limit and NaN guard at the last stage.
 //! * [`lag`]: the lag compensator with its free integrator (eq. 4.5).
 //! * [`plant`]: the linear plant of eq. 4.4 as an exact fixed-step simulator.
+//! * [`frame`]: the capture wire format (firmware encoder, host decoder).
 //!
 //! Each block keeps its configuration (coefficients, `Copy`) apart from its state, so a new
 //! configuration can be computed outside the interrupt and swapped in whole.
@@ -29,6 +30,7 @@
 
 pub mod codes;
 pub mod discretize;
+pub mod frame;
 pub mod lag;
 pub mod limits;
 pub mod params;
