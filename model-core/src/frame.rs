@@ -114,6 +114,8 @@ impl Records {
 }
 
 /// What a frame says.
+// No allocator: a Data frame's records are held inline on purpose (248 bytes).
+#[allow(clippy::large_enum_variant)]
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Frame {
     /// A stream begins.
@@ -192,6 +194,7 @@ pub enum DecodeError {
 }
 
 /// The result of one [`decode`] call.
+#[allow(clippy::large_enum_variant)]
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Decoded {
     /// The input holds the start of a frame (or nothing): read more bytes and call again.
