@@ -11,4 +11,5 @@ pub mod command;
 pub mod liveness;
 pub mod mailbox;
 pub mod scaling;
+pub mod settings;
 pub mod stats;

@@ -20,6 +20,9 @@
 //! * [`limits`]: window, slew limit and NaN guard at the last stage.
 //! * [`lag`]: the lag compensator with its free integrator (eq. 4.5).
 //! * [`plant`]: the linear plant of eq. 4.4 as an exact fixed-step simulator.
+//! * [`controller`]: the one per-sample function the firmware's interrupt and the QEMU runs
+//!   call: modes, faults, compensator, limits.
+//! * [`hysteresis`]: the static hysteretic map (Everett table) with its turning-point memory.
 //! * [`frame`]: the capture wire format (firmware encoder, host decoder).
 //!
 //! Each block keeps its configuration (coefficients, `Copy`) apart from its state, so a new
@@ -29,8 +32,10 @@
 #![warn(missing_docs)]
 
 pub mod codes;
+pub mod controller;
 pub mod discretize;
 pub mod frame;
+pub mod hysteresis;
 pub mod lag;
 pub mod limits;
 pub mod params;

@@ -21,14 +21,15 @@ use model_core::frame::Record;
 use model_core::{AdcCode, params};
 
 use super::adc;
-use super::ctl::{Controller, ControllerState, Faults};
 use super::dac::Dac;
 use super::shared::*;
+use firmware::settings::LoopConfig;
+use model_core::controller::{ControllerState, Faults};
 
 /// Everything the interrupt owns.
 pub struct LoopContext {
-    /// The active configuration.
-    pub controller: Controller,
+    /// The active configuration (controller and reference).
+    pub config: LoopConfig,
     /// The controller's state (mode, latched faults, filter states).
     pub state: ControllerState,
     /// The DAC.
@@ -64,7 +65,7 @@ fn ADC() {
         STATUS.dac_late.fetch_add(1, Ordering::Relaxed);
     }
     if let Some(c) = CONFIG.take() {
-        ctx.controller = c;
+        ctx.config = c;
     }
     if let Some(mode) = mode_from_u8(MODE_REQUEST.swap(NO_MODE, Ordering::Relaxed)) {
         ctx.state.set_mode(mode);
@@ -81,7 +82,8 @@ fn ADC() {
     }
 
     let y = scaling::adc_code(reading.raw);
-    let s = ctx.controller.step(&mut ctx.state, y);
+    ctx.state.set_reference(ctx.config.reference_v);
+    let s = ctx.config.controller.step(&mut ctx.state, y);
     ctx.dac.write(s.dac);
 
     let r = AdcCode::from_volts(s.reference_v).0;

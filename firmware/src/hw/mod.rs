@@ -13,17 +13,10 @@
 mod adc;
 mod board;
 mod control;
-mod ctl_stub;
 mod dac;
-mod settings;
 mod shared;
 mod tasks;
 mod timer;
-
-/// The controller API the firmware drives.
-mod ctl {
-    pub use super::ctl_stub::*;
-}
 
 use core::sync::atomic::Ordering;
 
@@ -36,15 +29,14 @@ use embassy_stm32::usart::{self, BufferedUart};
 use embassy_stm32::wdg::IndependentWatchdog;
 use embassy_stm32::{bind_interrupts, interrupt, pac, peripherals};
 use embassy_time::Timer;
-use firmware::command::ReferenceRequest;
 use firmware::scaling::TimerSetting;
 use firmware::stats::CycleStats;
 use model_core::{DacCode, params};
 use panic_probe as _;
 use static_cell::StaticCell;
 
-use ctl::{Controller, ControllerState, Faults};
-use settings::Settings;
+use firmware::settings::Settings;
+use model_core::controller::{ControllerState, Faults};
 
 bind_interrupts!(struct Irqs {
     USART3 => usart::BufferedInterruptHandler<peripherals::USART3>;
@@ -69,29 +61,18 @@ async fn main(spawner: Spawner) {
     // The embassy time driver's interrupt must stay below the control interrupt.
     interrupt::TIM3.set_priority(board::PRIO_TIME);
 
-    let settings = Settings {
-        kc: params::LAG_KC,
-        tau_s: 1e-4,
-        feedforward: false,
-        reference: ReferenceRequest::Step {
-            level_v: params::SAFE_OUTPUT_V,
-        },
-        rate_hz: params::SAMPLE_RATE_HZ,
-    };
+    let settings = Settings::default();
     let setting = match TimerSetting::for_rate(board::TIMER_CLOCK_HZ, settings.rate_hz, 32) {
         Ok(t) => t,
         Err(_) => defmt::panic!("the default rate is reachable"),
     };
-    let controller = match settings
-        .controller_config()
-        .and_then(|c| Controller::new(&c))
-    {
+    let config = match settings.loop_config() {
         Ok(c) => c,
         Err(_) => defmt::panic!("the default configuration is valid"),
     };
 
     // 2. The DAC holds the safe value before anything else runs.
-    let safe = DacCode::from_volts(params::SAFE_OUTPUT_V as f32);
+    let safe = DacCode::from_volts(config.controller.safe_v());
     #[cfg(not(feature = "internal-dac"))]
     let dac = dac::Dac::new(p.SPI1, p.PA5, p.PB5, p.PD14, safe);
     #[cfg(feature = "internal-dac")]
@@ -99,7 +80,7 @@ async fn main(spawner: Spawner) {
     let mut output_enable = Output::new(p.PD15, Level::Low, Speed::Low);
 
     // 3. The interrupt's context.
-    let mut state = ControllerState::new();
+    let mut state = ControllerState::new(&config.controller);
     if iwdg_reset {
         state.raise(Faults::WATCHDOG);
     }
@@ -111,7 +92,7 @@ async fn main(spawner: Spawner) {
     };
     tasks::apply_rate_limits(setting.rate_hz);
     control::install(control::LoopContext {
-        controller,
+        config,
         state,
         dac,
         stats: CycleStats::new(shared::BUDGET_CYCLES.load(Ordering::Relaxed)),

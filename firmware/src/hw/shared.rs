@@ -10,10 +10,11 @@ use firmware::mailbox::Mailbox;
 use firmware::stats::SharedStats;
 use model_core::params;
 
-use super::ctl::{Controller, Mode};
+use firmware::settings::LoopConfig;
+use model_core::controller::Mode;
 
-/// New controller configurations, built by the command task.
-pub static CONFIG: Mailbox<Controller> = Mailbox::new();
+/// New loop configurations (controller and reference), built by the command task.
+pub static CONFIG: Mailbox<LoopConfig> = Mailbox::new();
 /// The interrupt's timing figures.
 pub static STATS: SharedStats = SharedStats::new();
 /// Watchdog liveness counters.

@@ -18,19 +18,18 @@ use model_core::frame::{self, FrameRef, Record};
 use model_core::{AdcCode, DacCode, params};
 
 use super::board::{CPU_HZ, TIMER_CLOCK_HZ};
-use super::ctl::{Controller, Faults, Mode};
-use super::settings::Settings;
 use super::shared::*;
 use super::timer;
+use firmware::settings::{Settings, SettingsError};
+use model_core::controller::{Faults, Mode};
 
 /// Fault bits and their names, for `faults` and `status`.
-const FAULT_NAMES: [(Faults, &str); 6] = [
+const FAULT_NAMES: [(Faults, &str); 5] = [
     (Faults::SENSOR_RANGE, "sensor_range"),
+    (Faults::SENSOR_STUCK, "sensor_stuck"),
     (Faults::NONFINITE, "nonfinite"),
     (Faults::OVERRUN, "overrun"),
     (Faults::WATCHDOG, "watchdog"),
-    (Faults::SENSOR_STUCK, "sensor_stuck"),
-    (Faults::BAD_CONFIG, "bad_config"),
 ];
 
 type Reply = String<320>;
@@ -77,12 +76,10 @@ fn status(out: &mut Reply, settings: &Settings) {
     let u = DacCode::new(load_i16(&STATUS.u)).volts();
     let _ = write!(
         out,
-        "ok mode={} y_v={y:.4} r_v={r:.4} u_v={u:.4} rate_hz={:.0} kc={} tau_s={:e} ff={} isr_max_us={:.2} isr_mean_us={:.2} overruns={} dac_late={} samples={} ",
+        "ok mode={} y_v={y:.4} r_v={r:.4} u_v={u:.4} rate_hz={:.0} kc={} isr_max_us={:.2} isr_mean_us={:.2} overruns={} dac_late={} samples={} ",
         mode_name(mode),
         settings.rate_hz,
         settings.kc,
-        settings.tau_s,
-        if settings.feedforward { "on" } else { "off" },
         scaling::cycles_to_us(st.max_cycles, CPU_HZ),
         scaling::cycles_to_us(st.mean_cycles, CPU_HZ),
         st.overruns,
@@ -94,12 +91,9 @@ fn status(out: &mut Reply, settings: &Settings) {
 
 /// Builds, checks and posts a controller for `candidate`; on success it becomes the settings.
 fn commit(settings: &mut Settings, candidate: Settings, out: &mut Reply) -> bool {
-    match candidate
-        .controller_config()
-        .and_then(|c| Controller::new(&c))
-    {
-        Ok(ctl) => {
-            CONFIG.post(ctl);
+    match candidate.loop_config() {
+        Ok(cfg) => {
+            CONFIG.post(cfg);
             *settings = candidate;
             true
         }
@@ -159,22 +153,15 @@ fn handle(
                 let _ = write!(out, "ok kc {kc}");
             }
         }
-        Command::Tau(tau_s) => {
-            if commit(settings, Settings { tau_s, ..*settings }, out) {
-                let _ = write!(out, "ok tau_s {tau_s:e}");
-            }
+        Command::Tau(_) => {
+            let _ = write!(out, "err {}", SettingsError::Unsupported("the pre-filter"));
         }
-        Command::Feedforward(on) => {
-            if commit(
-                settings,
-                Settings {
-                    feedforward: on,
-                    ..*settings
-                },
+        Command::Feedforward(_) => {
+            let _ = write!(
                 out,
-            ) {
-                let _ = write!(out, "ok ff {}", if on { "on" } else { "off" });
-            }
+                "err {}",
+                SettingsError::Unsupported("the hysteresis feedforward")
+            );
         }
         Command::Rate(rate_hz) => {
             if mode_from_u8(STATUS.mode.load(Ordering::Relaxed)) != Some(Mode::Safe) {

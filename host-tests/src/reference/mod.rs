@@ -1,3 +1,6 @@
 //! Independent `f64` reference models. None of them calls model-core's maths: they are
 //! written from the continuous equations again, in another form, so that an error in one is
 //! not repeated in the other.
+
+pub mod lag;
+pub mod hysteresis_truth;
