@@ -6,6 +6,7 @@
 
 pub mod analysis;
 pub mod loop_cmd;
+pub mod record_cmd;
 pub mod reference;
 pub mod sim;
 pub mod testing;

@@ -17,12 +17,15 @@ struct Cli {
 enum Command {
     /// Closed-loop figures of the thesis loop (margins, bandwidth, step response).
     Loop(host_tests::loop_cmd::LoopArgs),
+    /// Capture a run on the board over its serial port and write it as CSV (t,u,y,r,flags).
+    Record(host_tests::record_cmd::RecordArgs),
 }
 
 fn main() -> std::process::ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Loop(a) => host_tests::loop_cmd::run(&a),
+        Command::Record(a) => host_tests::record_cmd::run(&a),
     };
     match result {
         Ok(()) => std::process::ExitCode::SUCCESS,
