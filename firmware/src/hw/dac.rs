@@ -99,7 +99,7 @@ mod external {
 mod internal {
     use super::*;
     use embassy_stm32::Peri;
-    use embassy_stm32::dac::DacCh1;
+    use embassy_stm32::dac::DacChannel;
     use embassy_stm32::peripherals::{DAC1, PA4};
     use firmware::scaling::internal_dac_value;
 
@@ -109,7 +109,7 @@ mod internal {
     impl Dac {
         /// Enables DAC1 channel 1 on PA4 and writes `safe`.
         pub fn new(dac: Peri<'static, DAC1>, pin: Peri<'static, PA4>, safe: DacCode) -> Self {
-            let ch = DacCh1::new_blocking(dac, pin);
+            let ch = DacChannel::new_blocking(dac, pin);
             // Dropping the channel would disable it: keep it enabled forever.
             core::mem::forget(ch);
             let mut d = Self;

@@ -54,6 +54,8 @@ async fn main(spawner: Spawner) {
 
     let mut cp = cortex_m::Peripherals::take().expect("core peripherals are taken once, here");
     cp.SCB.enable_icache();
+    // No DMA is used, so the data cache needs no maintenance.
+    cp.SCB.enable_dcache(&mut cp.CPUID);
     cp.DCB.enable_trace();
     DWT::unlock();
     cp.DWT.enable_cycle_counter();
@@ -109,6 +111,8 @@ async fn main(spawner: Spawner) {
     timer::start();
 
     // 5. The command link, the LEDs, the watchdog.
+    // Before the driver enables the interrupt (its NVIC default would be P0, the highest).
+    interrupt::USART3.set_priority(board::PRIO_UART);
     let mut ucfg = usart::Config::default();
     ucfg.baudrate = params::FW_UART_BAUD;
     let uart = match BufferedUart::new(
@@ -123,7 +127,6 @@ async fn main(spawner: Spawner) {
         Ok(u) => u,
         Err(_) => defmt::panic!("USART3 configuration"),
     };
-    interrupt::USART3.set_priority(board::PRIO_UART);
 
     Timer::after_millis(10).await;
     output_enable.set_high();

@@ -32,7 +32,7 @@ const FAULT_NAMES: [(Faults, &str); 5] = [
     (Faults::WATCHDOG, "watchdog"),
 ];
 
-type Reply = String<320>;
+type Reply = String<512>;
 
 /// Budget and stall limits that follow the loop rate.
 pub fn apply_rate_limits(rate_hz: f64) {
@@ -114,7 +114,7 @@ fn handle(
 ) -> Option<(u32, u32)> {
     match cmd {
         Command::Help => {
-            let _ = write!(out, "ok {}", &command::HELP[..command::HELP.len().min(300)]);
+            let _ = write!(out, "ok {}", command::HELP);
         }
         Command::Status => status(out, settings),
         Command::Faults => {
