@@ -18,6 +18,7 @@
 //! | `tau VALUE`                       | pre-filter time constant (`s`, `ms`, `us`)          |
 //! | `ff on\|off`                      | hysteresis feedforward                              |
 //! | `rate FREQ`                       | loop rate, 10..200 kHz (safe mode only)             |
+//! | `cal GAIN OFFSET`                 | ADC correction `y = GAIN * nominal + OFFSET` (`v`)  |
 //! | `status`, `faults`, `clear`       | report, report faults, clear latched faults         |
 //! | `capture DURATION`                | record r, y, u, flags for DURATION (`s`, `ms`)      |
 //! | `capture status`                  | state of the capture                                |
@@ -112,6 +113,13 @@ pub enum Command {
     Feedforward(bool),
     /// `rate FREQ`, Hz.
     Rate(f64),
+    /// `cal GAIN OFFSET`: ADC gain and offset (volts) correction, range-checked.
+    Calibrate {
+        /// Gain.
+        gain: f64,
+        /// Offset, volts.
+        offset_v: f64,
+    },
     /// `capture ...`.
     Capture(CaptureRequest),
 }
@@ -159,7 +167,7 @@ impl ParseError {
 /// The text of `help`.
 pub const HELP: &str = "commands: mode safe|open|closed|hold; ref step LEVEL; ref sine OFFSET AMPL FREQ; \
 ref triangle OFFSET AMPL FREQ (levels in um or v, FREQ in hz or khz); kc VALUE; tau VALUE(s|ms|us); \
-ff on|off; rate FREQ (safe mode only); status; faults; clear; capture DURATION(s|ms); capture status; \
+ff on|off; rate FREQ (safe mode only); cal GAIN OFFSET(v); status; faults; clear; capture DURATION(s|ms); capture status; \
 capture send [FIRST COUNT]";
 
 /// The units a number may carry.
@@ -208,6 +216,14 @@ fn number(word: &str) -> Result<f64, ParseError> {
         Ok(x)
     } else {
         Err(ParseError::NotFinite)
+    }
+}
+
+/// A voltage with the unit `v` (not a sensor level: `um` is refused, negative allowed).
+fn signed_volts(word: &str) -> Result<f64, ParseError> {
+    match word.strip_suffix('v') {
+        Some(num) => number(num),
+        None => Err(ParseError::BadUnit),
     }
 }
 
@@ -349,6 +365,20 @@ pub fn parse(line: &str) -> Result<Command, ParseError> {
             )?)),
             _ => Err(ParseError::WrongArgumentCount),
         },
+        "cal" => match args {
+            [g, o] => {
+                let gain = number(g)?;
+                let offset_v = signed_volts(o)?;
+                if (gain - 1.0).abs() <= params::FW_CAL_MAX_GAIN_ERROR
+                    && offset_v.abs() <= params::FW_CAL_MAX_OFFSET_V
+                {
+                    Ok(Command::Calibrate { gain, offset_v })
+                } else {
+                    Err(ParseError::OutOfRange)
+                }
+            }
+            _ => Err(ParseError::WrongArgumentCount),
+        },
         "capture" => match args {
             ["status"] => Ok(Command::Capture(CaptureRequest::Status)),
             ["send"] => Ok(Command::Capture(CaptureRequest::Send { range: None })),
@@ -434,6 +464,13 @@ mod tests {
             Ok(Command::Capture(CaptureRequest::Send { range: None }))
         );
         assert_eq!(parse("status"), Ok(Command::Status));
+        assert_eq!(
+            parse("cal 1.0129 -0.0558v"),
+            Ok(Command::Calibrate {
+                gain: 1.0129,
+                offset_v: -0.0558
+            })
+        );
     }
 
     #[test]
@@ -477,6 +514,14 @@ mod tests {
             ("rate 5khz", OutOfRange),
             ("rate 300khz", OutOfRange),
             ("rate 50000", BadUnit),
+            ("cal 1.0", WrongArgumentCount),
+            ("cal 1.0 0.1", BadUnit),
+            ("cal 1.0 0.1um", BadUnit),
+            ("cal 1.0 0.1.1v", BadNumber),
+            ("cal 1.5 0v", OutOfRange),
+            ("cal 1.0 1v", OutOfRange),
+            ("cal nan 0v", NotFinite),
+            ("cal 1 nanv", NotFinite),
             ("capture 0s", OutOfRange),
             ("capture -1s", OutOfRange),
             ("capture 1", BadUnit),

@@ -18,6 +18,7 @@ use model_core::limits::ConfigError;
 use model_core::params;
 
 use crate::command::ReferenceRequest;
+use crate::scaling::AdcCalibration;
 
 /// What the command task keeps.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -28,6 +29,8 @@ pub struct Settings {
     pub reference: ReferenceRequest,
     /// Loop rate, Hz (as obtained from the timer).
     pub rate_hz: f64,
+    /// ADC front-end correction.
+    pub adc_cal: AdcCalibration,
 }
 
 /// What the interrupt receives: `Copy`, swapped in whole.
@@ -37,6 +40,8 @@ pub struct LoopConfig {
     pub controller: Controller,
     /// The reference level, volts (sensor volts in closed loop, amplifier volts in open loop).
     pub reference_v: f32,
+    /// ADC front-end correction.
+    pub adc_cal: AdcCalibration,
 }
 
 /// Why settings cannot be applied.
@@ -66,6 +71,7 @@ impl Default for Settings {
                 level_v: params::SAFE_OUTPUT_V,
             },
             rate_hz: params::SAMPLE_RATE_HZ,
+            adc_cal: AdcCalibration::front_end_default(),
         }
     }
 }
@@ -111,6 +117,7 @@ impl Settings {
         Ok(LoopConfig {
             controller,
             reference_v,
+            adc_cal: self.adc_cal,
         })
     }
 }

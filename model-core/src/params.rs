@@ -169,3 +169,16 @@ pub const FW_HEARTBEAT_HALF_PERIOD_S: f64 = 0.25;
 /// SPI clock of the external DAC, Hz (DAC8311 allows 50 MHz, AD5641 30 MHz; our choice leaves
 /// margin for wiring): a 16-bit frame takes 1.3 us.
 pub const FW_DAC_SPI_HZ: u32 = 12_500_000;
+/// ADC front end (firmware README): series resistor from the sensor monitor to the buffer
+/// input, ohms (our design).
+pub const FW_ADC_R_IN_OHM: f64 = 100.0e3;
+/// ADC front end: resistor from VREF+ to the buffer input, ohms (E96; our design).
+pub const FW_ADC_R_REF_OHM: f64 = 32.4e3;
+/// ADC front end: resistor from the buffer input to ground, ohms (E96; our design).
+pub const FW_ADC_R_GND_OHM: f64 = 48.7e3;
+/// VREF+ of the NUCLEO-H743ZI2 (tied to VDDA, 3.3 V; UM2407).
+pub const FW_ADC_VREF_V: f64 = 3.3;
+/// Largest gain correction a `cal` command may set (our assumption: +-10 %).
+pub const FW_CAL_MAX_GAIN_ERROR: f64 = 0.1;
+/// Largest offset correction a `cal` command may set, volts (our assumption).
+pub const FW_CAL_MAX_OFFSET_V: f64 = 0.5;

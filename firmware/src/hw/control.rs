@@ -15,7 +15,6 @@ use cortex_m::peripheral::DWT;
 use critical_section::Mutex;
 use embassy_stm32::interrupt;
 use firmware::capture::Producer;
-use firmware::scaling;
 use firmware::stats::CycleStats;
 use model_core::frame::Record;
 use model_core::{AdcCode, params};
@@ -81,7 +80,7 @@ fn ADC() {
         ctx.state.raise(Faults::WATCHDOG);
     }
 
-    let y = scaling::adc_code(reading.raw);
+    let y = ctx.config.adc_cal.apply(reading.raw);
     ctx.state.set_reference(ctx.config.reference_v);
     let s = ctx.config.controller.step(&mut ctx.state, y);
     ctx.dac.write(s.dac);

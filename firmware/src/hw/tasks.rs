@@ -76,10 +76,12 @@ fn status(out: &mut Reply, settings: &Settings) {
     let u = DacCode::new(load_i16(&STATUS.u)).volts();
     let _ = write!(
         out,
-        "ok mode={} y_v={y:.4} r_v={r:.4} u_v={u:.4} rate_hz={:.0} kc={} isr_max_us={:.2} isr_mean_us={:.2} overruns={} dac_late={} samples={} ",
+        "ok mode={} y_v={y:.4} r_v={r:.4} u_v={u:.4} rate_hz={:.0} kc={} cal_gain={} cal_offset_v={} isr_max_us={:.2} isr_mean_us={:.2} overruns={} dac_late={} samples={} ",
         mode_name(mode),
         settings.rate_hz,
         settings.kc,
+        settings.adc_cal.gain,
+        settings.adc_cal.offset_v,
         scaling::cycles_to_us(st.max_cycles, CPU_HZ),
         scaling::cycles_to_us(st.mean_cycles, CPU_HZ),
         st.overruns,
@@ -193,6 +195,24 @@ fn handle(
                 }
             }
         }
+        Command::Calibrate { gain, offset_v } => match scaling::AdcCalibration::new(gain, offset_v)
+        {
+            Ok(adc_cal) => {
+                if commit(
+                    settings,
+                    Settings {
+                        adc_cal,
+                        ..*settings
+                    },
+                    out,
+                ) {
+                    let _ = write!(out, "ok cal gain {gain} offset_v {offset_v}");
+                }
+            }
+            Err(_) => {
+                let _ = write!(out, "err calibration out of range");
+            }
+        },
         Command::Capture(CaptureRequest::Arm { duration_s }) => {
             // Rounded to the nearest sample; `as` saturates, and the parser refused NaN.
             let n = (duration_s * settings.rate_hz + 0.5) as u64;
