@@ -4,6 +4,7 @@
 //! Every verb of `piezo` is a function here; `src/bin/piezo.rs` only parses arguments.
 //! The control maths itself lives in `model-core`; this crate calls it and checks it.
 
+pub mod identify;
 pub mod loop_cmd;
 pub mod reference;
 pub mod testing;
