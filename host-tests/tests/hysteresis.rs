@@ -460,16 +460,24 @@ fn identified_table_reproduces_the_truth_on_new_inputs() {
     }
 }
 
-fn max_u_error_of_inverse(table: &HysteresisTable, h: &[f64], u: f64) -> (f64, f64) {
+/// From the state after history `h`: |inverse(forward(u)) - u|, the output mismatch after
+/// the inverse, and |inverse - inverse_by_bisection| for the same wanted output.
+fn inverse_errors(table: &HysteresisTable, h: &[f64], u: f64) -> (f64, f64, f64) {
     let mut m1 = HysteresisMemory::new();
     for &x in h {
         table.forward(&mut m1, x as f32);
     }
     let mut m2 = m1.clone();
+    let mut m3 = m1.clone();
     let y = table.forward(&mut m1, u as f32);
     let u_inv = table.inverse(&mut m2, y);
+    let u_bis = table.inverse_by_bisection(&mut m3, y);
     let y_again = m2.output_v();
-    ((u_inv as f64 - u).abs(), (y_again - y).abs() as f64)
+    (
+        (u_inv as f64 - u).abs(),
+        (y_again - y).abs() as f64,
+        (u_inv - u_bis).abs() as f64,
+    )
 }
 
 #[test]
@@ -479,20 +487,45 @@ fn inverse_of_forward_is_identity_within_resolution() {
         ("thesis default", HysteresisTable::thesis_default()),
         ("identified", *identified()),
     ] {
-        let (mut du, mut dy) = (0.0f64, 0.0f64);
-        for _ in 0..2000 {
-            let n = rng.gen_range(0..30);
-            let h: Vec<f64> = (0..n).map(|_| rng.gen_range(0.0..10.0)).collect();
-            let (a, b) = max_u_error_of_inverse(&table, &h, rng.gen_range(0.0..10.0));
+        let (mut du, mut dy, mut db) = (0.0f64, 0.0f64, 0.0f64);
+        for _ in 0..3000 {
+            let n = rng.gen_range(0..40);
+            let h: Vec<f64> = (0..n).map(|_| rng.gen_range(-0.5..10.5)).collect();
+            let (a, b, c) = inverse_errors(&table, &h, rng.gen_range(0.0..10.0));
             du = du.max(a);
             dy = dy.max(b);
+            db = db.max(c);
         }
         println!(
-            "{name}: inverse(forward(u)) - u up to {du:.2e} V, output mismatch up to {dy:.2e} V (grid step {:.3} V)",
+            "{name}: |inverse(forward(u)) - u| up to {du:.2e} V, output mismatch up to {dy:.2e} V, exact vs bisection inverse up to {db:.2e} V (grid step {:.3} V)",
             table.step_v()
         );
         assert!(du <= 1e-4, "{du}");
         assert!(dy <= 1e-5, "{dy}");
+        assert!(db <= 1e-4, "{db}");
+    }
+}
+
+proptest! {
+    #[test]
+    fn inverse_follows_any_wanted_path(h in history(), w in prop::collection::vec(-0.5f64..8.5, 1..40)) {
+        // Whatever output is asked, the inverse gives an input in range whose output is the
+        // wanted one (or the major-loop edge), and memory stays in step with forward.
+        let t = table();
+        let (y_lo, y_hi) = t.output_range_v();
+        let mut m = HysteresisMemory::new();
+        for &u in &h { t.forward(&mut m, u as f32); }
+        for &wanted in &w {
+            let mut shadow = m.clone();
+            let u = t.inverse(&mut m, wanted as f32);
+            let y = t.forward(&mut shadow, u);
+            prop_assert!((y - m.output_v()).abs() < 1e-6);
+            prop_assert!(m.depth() == shadow.depth());
+            let reachable = wanted >= y_lo as f64 && wanted <= y_hi as f64;
+            if !m.flags().contains(Flags::CLAMPED) && reachable {
+                prop_assert!((y as f64 - wanted).abs() < 1e-4, "{} vs {}", y, wanted);
+            }
+        }
     }
 }
 
