@@ -662,3 +662,38 @@ fn identification_at_5_khz_with_dac_steps_and_thesis_sensor_noise() {
     );
     assert!(rms <= 0.05 && peak <= 0.15);
 }
+
+#[test]
+fn ground_truth_has_the_thesis_loop() {
+    // The play-operator truth over a full 0..10 V cycle: span 7.9 V, width about 15 %; and
+    // the same 2 V loop at two offsets differs in height (the output map), unlike the default
+    // table, whose Everett function depends on the amplitude alone.
+    let mut truth = PlayOperatorTruth::thesis_like();
+    let n = 2000usize;
+    let mut up = vec![0.0; n + 1];
+    let mut down = vec![0.0; n + 1];
+    for (k, y) in up.iter_mut().enumerate() {
+        *y = truth.step(10.0 * k as f64 / n as f64);
+    }
+    for k in (0..=n).rev() {
+        down[k] = truth.step(10.0 * k as f64 / n as f64);
+    }
+    let span = up[n] - up[0];
+    let width = (0..=n).map(|k| down[k] - up[k]).fold(0.0f64, f64::max);
+    let loop_height = |lo: f64| {
+        let mut t = PlayOperatorTruth::thesis_like();
+        t.step(lo);
+        t.step(lo + 2.0);
+        let a = t.step(lo);
+        let b = t.step(lo + 2.0);
+        b - a
+    };
+    let (h_low, h_high) = (loop_height(1.0), loop_height(7.0));
+    println!(
+        "truth: span {span:.3} V, largest loop width {width:.3} V = {:.1} % of span; 2 V minor loop height at 1..3 V {h_low:.3} V, at 7..9 V {h_high:.3} V",
+        100.0 * width / span
+    );
+    assert!((span - 7.9).abs() < 1e-9);
+    assert!((0.14..=0.16).contains(&(width / span)));
+    assert!((h_high - h_low).abs() > 0.05);
+}
