@@ -8,7 +8,7 @@
 //! time itself with the DWT cycle counter. Nothing in here waits, allocates or locks for
 //! longer than the copy of a configuration that the mailbox does when one is pending.
 
-use core::cell::RefCell;
+use core::cell::Cell;
 use core::sync::atomic::Ordering;
 
 use cortex_m::peripheral::DWT;
@@ -39,12 +39,13 @@ pub struct LoopContext {
     pub capture: Producer<{ params::FW_CAPTURE_RECORDS }>,
 }
 
-static HANDOVER: Mutex<RefCell<Option<LoopContext>>> = Mutex::new(RefCell::new(None));
+// A `Cell`, not a `RefCell`: taking the context has no borrow flag and no panic path.
+static HANDOVER: Mutex<Cell<Option<LoopContext>>> = Mutex::new(Cell::new(None));
 
 /// Hands the context to the interrupt (before the timer starts).
 pub fn install(ctx: LoopContext) {
     critical_section::with(|cs| {
-        HANDOVER.borrow(cs).replace(Some(ctx));
+        HANDOVER.borrow(cs).set(Some(ctx));
     });
 }
 

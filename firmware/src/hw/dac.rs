@@ -4,8 +4,8 @@
 //! (CPOL 0, CPHA 1: the part samples on the falling edge), 16-bit frames `PD1 PD0 D13..D0`
 //! from `DacCode::spi_frame()`, SYNC on a GPIO. embassy's SPI driver configures pins, clock
 //! and mode once; after that this module owns the registers: SPI1 is switched to simplex
-//! transmit, 16-bit frames, endless transfer (TSIZE = 0) and started once, so a write is one
-//! store to TXDR. SYNC is handled without waiting in the interrupt: [`Dac::begin`] at the
+//! transmit, 16-bit frames, endless transfer (TSIZE = 0), so a write is one store to TXDR
+//! and one to CR1.CSTART. SYNC is handled without waiting in the interrupt: [`Dac::begin`] at the
 //! start of the next sample raises SYNC (the frame finished long ago: 1.3 us at 12.5 MHz) and
 //! [`Dac::write`] lowers it and queues the frame. The part updates its output on the 16th
 //! clock edge, so the output latency is the frame time only.
@@ -89,8 +89,11 @@ mod external {
         #[inline(always)]
         pub fn write(&mut self, code: DacCode) {
             self.sync.set_low();
-            // A 16-bit store pushes exactly one 16-bit frame into the TX FIFO.
-            pac::SPI1.txdr16().write_value(code.spi_frame());
+            // A 16-bit store pushes exactly one 16-bit frame into the TX FIFO; CSTART (kept
+            // set by the endless transfer, set again as embassy's own driver does) sends it.
+            let r = pac::SPI1;
+            r.txdr16().write_value(code.spi_frame());
+            r.cr1().modify(|w| w.set_cstart(true));
         }
     }
 }
