@@ -10,6 +10,7 @@ pub mod capture;
 pub mod command;
 pub mod liveness;
 pub mod mailbox;
+pub mod sample;
 pub mod scaling;
 pub mod settings;
 pub mod stats;

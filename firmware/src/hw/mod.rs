@@ -29,6 +29,7 @@ use embassy_stm32::usart::{self, BufferedUart};
 use embassy_stm32::wdg::IndependentWatchdog;
 use embassy_stm32::{bind_interrupts, interrupt, pac, peripherals};
 use embassy_time::Timer;
+use firmware::sample::LoopCore;
 use firmware::scaling::TimerSetting;
 use firmware::stats::CycleStats;
 use model_core::{DacCode, params};
@@ -94,11 +95,13 @@ async fn main(spawner: Spawner) {
     };
     tasks::apply_rate_limits(setting.rate_hz);
     control::install(control::LoopContext {
-        config,
-        state,
+        core: LoopCore {
+            config,
+            state,
+            stats: CycleStats::new(shared::BUDGET_CYCLES.load(Ordering::Relaxed)),
+            capture: producer,
+        },
         dac,
-        stats: CycleStats::new(shared::BUDGET_CYCLES.load(Ordering::Relaxed)),
-        capture: producer,
     });
 
     // 4. ADC on the timer's trigger; the control interrupt at the highest priority.

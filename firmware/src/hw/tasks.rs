@@ -20,6 +20,7 @@ use model_core::{AdcCode, DacCode, params};
 use super::board::{CPU_HZ, TIMER_CLOCK_HZ};
 use super::shared::*;
 use super::timer;
+use firmware::sample::Status;
 use firmware::settings::{Settings, SettingsError};
 use model_core::controller::{Faults, Mode};
 
@@ -70,10 +71,10 @@ fn write_faults(out: &mut Reply, bits: u8) {
 
 fn status(out: &mut Reply, settings: &Settings) {
     let st = STATS.snapshot();
-    let mode = mode_from_u8(STATUS.mode.load(Ordering::Relaxed));
-    let y = AdcCode(load_i16(&STATUS.y)).volts();
-    let r = AdcCode(load_i16(&STATUS.r)).volts();
-    let u = DacCode::new(load_i16(&STATUS.u)).volts();
+    let mode = STATUS.mode();
+    let y = AdcCode(Status::load_i16(&STATUS.y)).volts();
+    let r = AdcCode(Status::load_i16(&STATUS.r)).volts();
+    let u = DacCode::new(Status::load_i16(&STATUS.u)).volts();
     let _ = write!(
         out,
         "ok mode={} y_v={y:.4} r_v={r:.4} u_v={u:.4} rate_hz={:.0} kc={} cal_gain={} cal_offset_v={} isr_max_us={:.2} isr_mean_us={:.2} overruns={} dac_late={} samples={} ",
@@ -124,7 +125,7 @@ fn handle(
             write_faults(out, STATUS.faults.load(Ordering::Relaxed));
         }
         Command::Clear => {
-            CLEAR_REQUEST.store(true, Ordering::Relaxed);
+            REQUESTS.clear_faults();
             STATS.request_clear();
             let _ = write!(out, "ok cleared");
         }
@@ -135,7 +136,7 @@ fn handle(
                 ModeRequest::Closed => Mode::ClosedLoop,
                 ModeRequest::Hold => Mode::Hold,
             };
-            MODE_REQUEST.store(mode_to_u8(mode), Ordering::Relaxed);
+            REQUESTS.set_mode(mode);
             let _ = write!(out, "ok mode {}", mode_name(Some(mode)));
         }
         Command::Reference(r) => {
@@ -166,7 +167,7 @@ fn handle(
             );
         }
         Command::Rate(rate_hz) => {
-            if mode_from_u8(STATUS.mode.load(Ordering::Relaxed)) != Some(Mode::Safe) {
+            if STATUS.mode() != Some(Mode::Safe) {
                 let _ = write!(out, "err rate can only change in safe mode");
             } else if !matches!(
                 CAPTURE.state(),
