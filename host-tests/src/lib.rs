@@ -9,3 +9,4 @@ pub mod loop_cmd;
 pub mod reference;
 pub mod sim;
 pub mod testing;
+pub mod track;
