@@ -3,3 +3,4 @@
 //! not repeated in the other.
 
 pub mod lag;
+pub mod prefilter;
