@@ -163,7 +163,8 @@ pub struct PreFilterConfig {
 }
 
 impl Default for PreFilterConfig {
-    /// The full pre-filter with `tau = 50 us`, the delay and hold shifted into the preview.
+    /// The full pre-filter with `tau = 50 us`, the loop delay and the DAC hold's half sample
+    /// shifted into the preview (see the design note for why).
     fn default() -> Self {
         Self {
             tau_s: params::PREFILTER_TAU_S,

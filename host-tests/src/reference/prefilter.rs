@@ -6,9 +6,9 @@
 //! 1/G(s) = s (s/p + 1) (s/we + 1) (s^2/wn^2 + 2 zeta s/wn + 1) / (Kc K (s + z_c)),  F = 1/(tau s + 1)^4
 //! ```
 //!
-//! with `d + f = (Td + T/2)/T` the shifted delay (whole samples plus a linearly interpolated
+//! with `d + f = Td/T` (or `(Td + T/2)/T` with the hold) the shifted delay (whole samples plus a linearly interpolated
 //! fraction) and `I(z) = 1 - delta + delta z^-1` the input's fractional delay that makes the
-//! total lag `K = ceil((Td + T/2 + 4 tau)/T)` whole samples. The time response comes from the
+//! total lag `K = ceil((Td + 4 tau)/T)` whole samples. The time response comes from the
 //! frequency response by an inverse FFT (impulse response), so it too is independent of any
 //! recursion.
 use rustfft::FftPlanner;
@@ -32,7 +32,7 @@ pub struct RefPreFilter {
     pub wn: f64,
     /// Stage damping.
     pub zeta: f64,
-    /// Delay shifted into the preview, seconds (Td + T/2).
+    /// Delay shifted into the preview, seconds (Td, or Td + T/2 with the hold).
     pub shifted_delay_s: f64,
     /// Planning time constant, seconds.
     pub tau_s: f64,
@@ -52,10 +52,16 @@ impl RefPreFilter {
             we: 2.0 * PI * 2000.0,
             wn: 2.0 * PI * 5792.0,
             zeta: 0.08,
-            shifted_delay_s: 85e-6 + t / 2.0,
+            shifted_delay_s: 85e-6,
             tau_s,
             period_s: t,
         }
+    }
+
+    /// The same with the DAC hold's half sample added to the shifted delay.
+    pub fn with_hold(mut self) -> Self {
+        self.shifted_delay_s += 0.5 * self.period_s;
+        self
     }
 
     /// Total lag of the filter in whole samples (the preview it asks for).
