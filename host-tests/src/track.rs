@@ -271,10 +271,13 @@ pub fn simulate(spec: &TrackSpec, record: bool) -> anyhow::Result<TrackRun> {
     })
 }
 
-/// Draw reference, output (top) and error (bottom) to an SVG file.
-pub fn plot(run: &TrackRun, title: &str, path: &std::path::Path) -> anyhow::Result<()> {
+/// Draw reference, output (top) and error (bottom) of a recorded trace to an SVG file.
+pub fn plot(
+    tr: &[(f64, f64, f64, f64)],
+    title: &str,
+    path: &std::path::Path,
+) -> anyhow::Result<()> {
     use plotters::prelude::*;
-    let tr = &run.trace;
     if tr.is_empty() {
         bail!("nothing recorded to plot");
     }
@@ -360,11 +363,13 @@ pub fn run(a: &TrackArgs) -> anyhow::Result<()> {
         TrackSpec::new(a.shape, a.freq, a.amplitude, a.offset, a.prefilter.mode()).with_tau(a.tau);
     let r = simulate(&spec, a.plot.is_some())?;
     if let Some(path) = &a.plot {
+        // The last two periods of the measured ones.
+        let keep = ((2.0 / (a.freq * spec.lag.period_s)).ceil() as usize).min(r.trace.len());
         let title = format!(
-            "{:?} {} Hz, {} V peak, pre-filter {:?}",
+            "{:?} {} Hz, {} V peak, pre-filter {:?}: last two periods",
             a.shape, a.freq, a.amplitude, a.prefilter
         );
-        plot(&r, &title, path)?;
+        plot(&r.trace[r.trace.len() - keep..], &title, path)?;
     }
     let f = r.figures;
     if a.json {

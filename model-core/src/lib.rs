@@ -21,7 +21,7 @@
 //! * [`lag`]: the lag compensator with its free integrator (eq. 4.5).
 //! * [`plant`]: the linear plant of eq. 4.4 as an exact fixed-step simulator.
 //! * [`prefilter`]: the reference pre-filter `H'` (eq. 4.12), derived from the loop at run time.
-//! * [`reference`]: reference generators (step, ramp, sine, triangle, square, sweep) with preview.
+//! * [`reference`](mod@reference): reference generators (step, ramp, sine, triangle, square, sweep) with preview.
 //!
 //! Each block keeps its configuration (coefficients, `Copy`) apart from its state, so a new
 //! configuration can be computed outside the interrupt and swapped in whole.

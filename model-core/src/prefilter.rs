@@ -52,58 +52,109 @@
 //!
 //! for `(c1 s + c0)/(d1 s + d0)`: a zero at z = 1 is `bs = 0` exactly, a zero near 1 is the
 //! ratio of `bd` and `bs`, each to full `f32` precision, and `alpha = 1 - a` is computed
-//! without cancellation; the state is an [`Accumulator`]. The stage-mode section has no
+//! without cancellation; the section whose pole is near z = 1 (`S_hp`) keeps its state in an
+//! [`Accumulator`], the others (poles at `(2 tau - T)/(2 tau + T) = 0.67`) in plain `f32`. The stage-mode section has no
 //! pole or zero near z = 1 (double pole at `(2 tau - T)/(2 tau + T)`, zeros at `|z| = 0.94`)
 //! and runs as an `f32` direct form I biquad.
 //!
 //! # The delay: decided and measured
-//! `exp(+Td s)` in the inverse is an advance: not causal. Alternatives ([`DelayHandling`]):
+//! `exp(+Td s)` in the inverse is an advance: not causal. Alternatives ([`DelayHandling`]),
+//! measured in the closed-loop simulation (host-tests `tests/prefilter.rs`, `delay_alternatives`:
+//! 6 V p-p around 4 V, tau = 50 us, 50 kHz, ADC/DAC quantisation, 1 mV sensor noise):
 //!
-//! * **Drop it** (`1/T ~ 1 + 1/G`): the inverse is then that of a loop without delay; the
-//!   85 us of the real loop are not compensated. Measured (100 Hz sine, 6 V p-p, tau = 50 us):
-//!   see the table in host-tests `tests/prefilter.rs` (`delay_alternatives`).
+//! ```text
+//! delay handling     sine 100 Hz rms   triangle 100 Hz rms   triangle 300 Hz rms   1 V step overshoot
+//! Drop                    21.2 mV             42.0 mV              217.2 mV              21.3 %
+//! Preview (Td)             1.6 mV              9.1 mV               46.9 mV               1.9 %
+//! PreviewWithHold          4.2 mV             11.3 mV               58.2 mV               0.1 %
+//! (feedback alone        425.4 mV            377.4 mV             1105.1 mV               7.9 %)
+//! ```
+//!
+//! * **Drop it** (`1/T ~ 1 + 1/G`): the inverse of a loop without delay. 5x worse than
+//!   shifting it, and a 21 % step overshoot: the 85 us are 0.27 rad of phase at 500 Hz.
 //! * **Pade**: a Pade approximant of the *advance* `exp(+Td s)` has its poles in the right
-//!   half plane (first order: a pole at `+2/Td = +23500 rad/s`), so `H'` would be unstable:
-//!   rejected without a run. (A Pade of the delay in `L` gives the same unstable pole in `1/L`.)
-//! * **Shift the delay into the preview** (chosen): `H' = exp(+Td s) F (exp(-Td s) + 1/G)`.
-//!   The factor `exp(+Td s)` is the reference generator's advance (preview); what remains is
-//!   causal: the planned reference `F r` is *delayed* by `Td` on the direct branch, and the
-//!   inverse branch `F/G` has no delay. The delay is realised exactly in whole samples (a delay
-//!   line) plus a linear interpolation for the fraction (its error on `F r`, band-limited by
-//!   the four poles, is below `(wT)^2 frac (1 - frac)/2 = 1.5e-5` at 100 Hz).
-//! * **Preview plus the hold** (`DelayHandling::PreviewWithHold`, the default): the sampled
-//!   loop's `L(z)` is `L(s)` with the DAC's zero-order hold, whose average delay is `T/2`; the
-//!   shifted delay is then `Td + T/2` (4.75 samples at 50 kHz). This is the exact inverse of the
-//!   *sampled* compensator and the first-order inverse of the sampled plant; what is left of
-//!   the sampled plant (its sampling zeros) are terms of order `(wT)^2` of the 1/G branch, which
-//!   itself weighs `|1/L|`, 13 % at 100 Hz.
+//!   half plane (first order: a pole at `+2/Td = +23500 rad/s`), so `H'` would be unstable.
+//!   Rejected without a run: there is nothing stable to measure. (A Pade of the delay in `L`
+//!   puts the same unstable pole into `1/L`.)
+//! * **Shift the delay into the preview**: `H' = exp(+Td s) F (exp(-Td s) + 1/G)`. The factor
+//!   `exp(+Td s)` is the reference generator's advance (preview); what remains is causal: the
+//!   planned reference `F r` is *delayed* by `Td` on the direct branch, and the inverse branch
+//!   `F/G` has no delay. The delay is realised exactly in whole samples (a delay line) plus a
+//!   linear interpolation for the fraction (its error on `F r`, band-limited by the four
+//!   poles, is below `(wT)^2 frac (1 - frac)/2 = 1.5e-5` at 100 Hz).
+//! * **Shift the delay and the hold** (`PreviewWithHold`, **the default**): the sampled loop's
+//!   `L(z)` is `L(s)` behind the DAC's zero-order hold, whose average delay is `T/2`, so the
+//!   shifted delay is `Td + T/2` (4.75 samples at 50 kHz). With it the loop follows `F r`
+//!   exactly up to terms of order `(wT)^2`: the measured 100 Hz sine error, 4.25 mV rms, is the
+//!   planning filter's own magnitude droop, `3 V * 2 (w tau)^2 / sqrt 2 = 4.19 mV`, to 0.06 mV.
+//!   `Preview` (Td alone) measures lower on sines because the uninverted half sample happens to
+//!   cancel part of that droop (both go as `w^2`; the balance depends on `Kc` and tau), but it
+//!   pays with 1.9 % of step overshoot, at the 2 % limit; the default keeps it at 0.1 %.
 //!
-//! Why not the exact inverse of the sampled loop `T(z)` with its sampling zeros: the ZOH of a
-//! relative-degree-3 plant with 0.25 sample of fractional delay has three sampling zeros, one
-//! outside the unit circle near z = -3, so its inverse must be ZPETC-style (the unstable zero
-//! kept by its zero-phase mirror, one more sample of preview) and the zeros found by a root
-//! finder at design time. The measured residual of the chosen design (table in the tests)
-//! shows what that extra work could still win.
+//! **Sampling zeros.** The exact inverse of the sampled loop `T(z)` would have to invert the
+//! sampling zeros of the ZOH plant (relative degree 3 plus 0.25 sample of fractional delay:
+//! three zeros, one outside the unit circle near z = -3), ZPETC-style with a root finder at
+//! design time. This design never places them: it inverts the continuous plant and the hold
+//! as `T/2`, so every pole of `H'` is one of the four planning poles or the image of the lag
+//! zero, stable by construction at any `Kc`, rate or plant. The price, the uninverted `(wT)^2`
+//! terms, is the 0.06 mV above: at 100 Hz an exact sampled inverse could not do better, since
+//! what remains is the planning itself.
 //!
 //! # Preview and lag
 //! The pre-filter's output follows `r` late by `Td' + 4 tau` (`Td' = Td + T/2` with the
-//! default delay handling): `4 tau` is the low-frequency group delay of `F`. [`PreFilter::preview_samples`]
-//! is that lag rounded up to whole samples, `K`; the remaining fraction `K - lag` delays the
-//! input by linear interpolation so the total is exactly `K` samples. When the reference is
-//! generated on board, [`crate::reference::ReferenceGenerator`] hands the pre-filter the
-//! reference `K` samples ahead and the stage follows `r` itself. Without preview (an external
-//! reference) the filter works unchanged and the stage follows `r` delayed by `K` samples
-//! (11 samples = 220 us at 50 kHz with tau = 50 us).
+//! default delay handling): `4 tau` is the low-frequency group delay of `F`.
+//! [`PreFilter::preview_samples`] is that lag rounded up to whole samples, `K`; the remaining
+//! fraction `K - lag` delays the input by linear interpolation so the total is exactly `K`
+//! samples. When the reference is generated on board,
+//! [`crate::reference::ReferenceGenerator`] hands the pre-filter the reference `K` samples
+//! ahead and the stage follows `r` itself. Without preview (an external reference) the filter
+//! works unchanged and the stage follows `r` delayed by `K` samples: 15 samples = 300 us at
+//! 50 kHz with tau = 50 us (a phase lag of 10.8 deg at 100 Hz; the shape is tracked as well
+//! as with preview, only late).
 //!
 //! # Choice of tau
-//! Criterion (measured in host-tests, `tau_trade_off`): the smallest tau whose pre-filter keeps
-//! (a) the DAC command of a 6 V p-p, 300 Hz triangle inside the 0..10 V window and away from
-//! the 3 V/sample slew limit, and (b) its high-frequency gain `|H'(inf)| =
-//! 1 + 1/(p we wn^2 Kc K tau^4)`, which multiplies the noise of an external reference, near a
-//! few units; tracking error falls like `tau^2` for sines with preview and like `tau` at the
-//! corners of a triangle. Sensor noise does not pass through the pre-filter at all (it acts on
-//! the reference only), so it does not constrain tau. The default, [`params::PREFILTER_TAU_S`],
-//! is 50 us.
+//! Criterion: the smallest tau whose pre-filter amplifies white noise on the reference by at
+//! most about 2 (`|H'|` at Nyquist and its RMS gain over the band; this matters for an
+//! external reference read by an ADC, and it is the high-frequency content the DAC command
+//! gets from the reference), while the command of a 6 V p-p 300 Hz triangle stays inside the
+//! 0..10 V window and far below the 3 V/sample slew limit. Sensor noise does not constrain tau:
+//! the pre-filter acts on the reference, never on the measurement. Measured (`tau_trade_off`):
+//!
+//! ```text
+//! tau us   sine 100 Hz   tri 100 Hz   tri 300 Hz   command tri 300   slew V/ms   |H'(Nyquist)|   noise gain
+//!   20       0.78 mV       3.1 mV       15.7 mV     1.27..8.86 V       6.8          59.7           46.9
+//!   30       1.59          5.4          27.7        1.40..8.72         5.3          11.8           10.5
+//!   50       4.25         11.3          58.2        1.54..8.59         4.6           1.53           1.64
+//!   75       9.46         20.5         106.4        1.73..8.40         4.6           0.30           0.48
+//!  100      16.7          31.5         163.4        1.92..8.21         4.6           0.10           0.26
+//!  200      65.7          88.8         458.8        2.64..7.49         4.4           0.01           0.13
+//! ```
+//!
+//! The sine error goes like `tau^2` (the droop of `F`), the triangle's like `tau` (its
+//! corners are rounded over about `8 tau`); the noise gain like `tau^-4`. 50 us is the smallest
+//! value in the table with a noise gain below 2 ([`params::PREFILTER_TAU_S`]); it leaves a
+//! 100x cut of the sine error and 34x of the triangle's at 100 Hz.
+//!
+//! # Measured tracking (issue #3; `full_prefilter_cuts_the_error_tenfold_at_100_hz`)
+//! ```text
+//! 6 V p-p around 4 V     feedback alone      planning only       full pre-filter     cut
+//!                        rms      peak       rms      peak       rms      peak
+//! sine      10 Hz       42.4     61.0 mV    42.4     60.9 mV     0.29     1.16 mV   147x
+//! sine     100 Hz      425.4    602.5      424.9    601.6        4.25     6.79      100x
+//! sine     300 Hz     1305.0   1845.9     1290.8   1826.2       37.8     54.1        34x
+//! triangle  10 Hz       38.1     45.6      38.1     44.6         0.45    10.0        85x
+//! triangle 100 Hz      377.4    448.5     375.5    436.2        11.3     94.6        34x
+//! triangle 300 Hz     1105.1   1343.0    1087.8   1305.8        58.2    282.5        19x
+//! ```
+//! No sample clamped by the window or held by the slew limit; the largest command slew is
+//! 7.1 V/ms (300 Hz sine) against the 150 V/ms limit. Steps (20 Hz square wave): overshoot
+//! 0.11 % for 1 V steps and 0.04 % for 6 V steps with the pre-filter, 7.9 % without.
+//!
+//! # Cost
+//! Per sample: 8 first-order sections (one with a compensated sum), one biquad, one delay-line
+//! read with interpolation: about 30 multiply-adds, a dependent chain through 8 sections.
+//! Host (criterion, `benches/prefilter.rs`, a shared 2-core machine, so noisy): 45-55 ns per
+//! step; the sine generator 6-11 ns. Cycles on the Cortex-M7 are still to be measured.
 //!
 //! # Example
 //! ```
@@ -182,9 +233,16 @@ struct Section1 {
     alpha: f32,
 }
 
-/// History of a [`Section1`].
+/// History of a [`Section1`] whose pole is far from z = 1: plain `f32`.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 struct State1 {
+    x: f32,
+    y: f32,
+}
+
+/// History of a [`Section1`] whose pole is near z = 1: compensated sum.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+struct State1Acc {
     x: f32,
     y: Accumulator,
 }
@@ -200,7 +258,7 @@ impl Section1 {
         }
     }
 
-    /// DC gain `c0/d0` from the coefficients (`bs/alpha * 2`), used to settle states.
+    /// DC gain `c0/d0` from the coefficients (`2 bs / alpha`), used to settle states.
     fn dc_gain(&self) -> f32 {
         if self.alpha == 0.0 {
             0.0
@@ -211,6 +269,13 @@ impl Section1 {
 
     #[inline]
     fn step(&self, s: &mut State1, x: f32) -> f32 {
+        s.y += self.bd * (x - s.x) + self.bs * (x + s.x) - self.alpha * s.y;
+        s.x = x;
+        s.y
+    }
+
+    #[inline]
+    fn step_acc(&self, s: &mut State1Acc, x: f32) -> f32 {
         let y = s.y.value();
         s.y.add(self.bd * (x - s.x) + self.bs * (x + s.x) - self.alpha * y);
         s.x = x;
@@ -219,6 +284,13 @@ impl Section1 {
 
     fn settle(&self, x: f32) -> State1 {
         State1 {
+            x,
+            y: self.dc_gain() * x,
+        }
+    }
+
+    fn settle_acc(&self, x: f32) -> State1Acc {
+        State1Acc {
             x,
             y: Accumulator::new(self.dc_gain() * x),
         }
@@ -306,7 +378,7 @@ pub struct PreFilterState {
     plan: [State1; 4],
     line: [f32; LINE],
     head: usize,
-    hp: State1,
+    hp: State1Acc,
     lag: State1,
     amp: State1,
     stage: State2,
@@ -408,7 +480,7 @@ impl PreFilter {
             plan: [p; 4],
             line: [r; LINE],
             head: 0,
-            hp: self.hp.settle(r),
+            hp: self.hp.settle_acc(r),
             lag: self.lag.settle(0.0),
             amp: self.amp.settle(0.0),
             stage: self.stage.settle(0.0),
@@ -443,7 +515,7 @@ impl PreFilter {
             let a = s.line[(s.head + LINE - self.direct_whole) % LINE];
             let b = s.line[(s.head + LINE - self.direct_whole - 1) % LINE];
             let direct = a + self.direct_frac * (b - a);
-            let h = self.hp.step(&mut s.hp, x);
+            let h = self.hp.step_acc(&mut s.hp, x);
             let g = self.lag.step(&mut s.lag, h);
             let e = self.amp.step(&mut s.amp, g);
             direct + self.stage.step(&mut s.stage, e)
