@@ -288,6 +288,14 @@ fn tau_trade_off() {
         noise_gains.windows(2).all(|w| w[0] > w[1]),
         "{noise_gains:?}"
     );
+    // The criterion: the default is the smallest tau of the table with a noise gain below 2.
+    let taus = [20e-6, 30e-6, 50e-6, 75e-6, 100e-6, 200e-6];
+    let chosen = taus
+        .iter()
+        .zip(&noise_gains)
+        .find(|(_, g)| **g < 2.0)
+        .map(|(t, _)| *t);
+    assert_eq!(chosen, Some(model_core::params::PREFILTER_TAU_S));
 }
 
 #[test]
