@@ -10,3 +10,4 @@ pub mod loop_cmd;
 pub mod reference;
 pub mod sim;
 pub mod testing;
+pub mod track;

@@ -17,12 +17,15 @@ struct Cli {
 enum Command {
     /// Closed-loop figures of the thesis loop (margins, bandwidth, step response).
     Loop(host_tests::loop_cmd::LoopArgs),
+    /// Tracking error of a periodic reference with and without the pre-filter.
+    Track(host_tests::track::TrackArgs),
 }
 
 fn main() -> std::process::ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Loop(a) => host_tests::loop_cmd::run(&a),
+        Command::Track(a) => host_tests::track::run(&a),
     };
     match result {
         Ok(()) => std::process::ExitCode::SUCCESS,
