@@ -61,7 +61,11 @@ pub fn run(a: &IdentifyArgs) -> anyhow::Result<()> {
                 poly: d.poly,
                 poly_range_v: [d.poly_range_v.0, d.poly_range_v.1],
             });
-            model.name = format!("{} + drift identified from {}", model.name, f.data.display());
+            model.name = format!(
+                "{} + drift identified from {}",
+                model.name,
+                f.data.display()
+            );
             model.build_stage()?;
             model.write(&f.out)?;
             println!(
@@ -73,13 +77,20 @@ pub fn run(a: &IdentifyArgs) -> anyhow::Result<()> {
                 1e3 * fit.rms_residual_v
             );
             for i in 0..3 {
-                println!("  lag {}: gain {:.4}  tau {:.4} s", i + 1, d.gains[i], d.taus_s[i]);
+                println!(
+                    "  lag {}: gain {:.4}  tau {:.4} s",
+                    i + 1,
+                    d.gains[i],
+                    d.taus_s[i]
+                );
             }
             println!("wrote {}", f.out.display());
             Ok(())
         }
         IdentifyTarget::Hysteresis(_) => {
-            anyhow::bail!("hysteresis identification is not available in this build yet (branch `hysteresis` not merged)")
+            anyhow::bail!(
+                "hysteresis identification is not available in this build yet (branch `hysteresis` not merged)"
+            )
         }
     }
 }

@@ -191,10 +191,18 @@ pub struct ModelFile {
     /// Converters and sensor.
     pub converters: ConvertersSection,
     /// `time-delay`.
-    #[serde(rename = "time-delay", default, skip_serializing_if = "Option::is_none")]
+    #[serde(
+        rename = "time-delay",
+        default,
+        skip_serializing_if = "Option::is_none"
+    )]
     pub time_delay: Option<DelaySection>,
     /// `amplifier-pole`.
-    #[serde(rename = "amplifier-pole", default, skip_serializing_if = "Option::is_none")]
+    #[serde(
+        rename = "amplifier-pole",
+        default,
+        skip_serializing_if = "Option::is_none"
+    )]
     pub amplifier_pole: Option<PoleSection>,
     /// `resonance`.
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -203,10 +211,18 @@ pub struct ModelFile {
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub drift: Option<DriftSection>,
     /// `nonlinear-gain`.
-    #[serde(rename = "nonlinear-gain", default, skip_serializing_if = "Option::is_none")]
+    #[serde(
+        rename = "nonlinear-gain",
+        default,
+        skip_serializing_if = "Option::is_none"
+    )]
     pub nonlinear_gain: Option<GainSection>,
     /// `slew-rate-limit`.
-    #[serde(rename = "slew-rate-limit", default, skip_serializing_if = "Option::is_none")]
+    #[serde(
+        rename = "slew-rate-limit",
+        default,
+        skip_serializing_if = "Option::is_none"
+    )]
     pub slew_rate_limit: Option<SlewSection>,
     /// `saturation`.
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -217,8 +233,14 @@ impl ModelFile {
     /// A built-in model by name.
     pub fn built_in(name: &str) -> Option<Self> {
         match name {
-            "thesis-linear" => Some(Self::from_stage_config("thesis-linear", &StageConfig::thesis_linear())),
-            "thesis-full" => Some(Self::from_stage_config("thesis-full", &StageConfig::thesis_full())),
+            "thesis-linear" => Some(Self::from_stage_config(
+                "thesis-linear",
+                &StageConfig::thesis_linear(),
+            )),
+            "thesis-full" => Some(Self::from_stage_config(
+                "thesis-full",
+                &StageConfig::thesis_full(),
+            )),
             _ => None,
         }
     }
@@ -235,13 +257,15 @@ impl ModelFile {
                 BUILT_IN.join(", ")
             );
         }
-        let text = std::fs::read_to_string(path).with_context(|| format!("cannot read model file {}", path.display()))?;
+        let text = std::fs::read_to_string(path)
+            .with_context(|| format!("cannot read model file {}", path.display()))?;
         Self::parse(&text).with_context(|| format!("model file {}", path.display()))
     }
 
     /// Parse TOML text and check that it builds a stage.
     pub fn parse(text: &str) -> anyhow::Result<Self> {
-        let m: Self = toml::from_str(text).map_err(|e| anyhow::anyhow!("{}", e.to_string().trim_end()))?;
+        let m: Self =
+            toml::from_str(text).map_err(|e| anyhow::anyhow!("{}", e.to_string().trim_end()))?;
         m.build_stage()?;
         Ok(m)
     }
@@ -257,7 +281,8 @@ impl ModelFile {
 
     /// Write to `path`.
     pub fn write(&self, path: &Path) -> anyhow::Result<()> {
-        std::fs::write(path, self.to_toml()?).with_context(|| format!("cannot write {}", path.display()))
+        std::fs::write(path, self.to_toml()?)
+            .with_context(|| format!("cannot write {}", path.display()))
     }
 
     /// The model file describing `c`.
@@ -271,7 +296,9 @@ impl ModelFile {
                 mode_hz: c.mode.mode_hz,
                 damping: c.mode.damping,
             },
-            amplifier: AmplifierSection { gain: c.amplifier.gain },
+            amplifier: AmplifierSection {
+                gain: c.amplifier.gain,
+            },
             converters: ConvertersSection {
                 dac: c.dac,
                 adc: c.sensor.adc,
@@ -295,7 +322,10 @@ impl ModelFile {
                 poly: g.poly,
                 range_v: pair(g.range_v),
             }),
-            slew_rate_limit: c.amplifier.slew_v_per_s.map(|s| SlewSection { output_v_per_s: s }),
+            slew_rate_limit: c
+                .amplifier
+                .slew_v_per_s
+                .map(|s| SlewSection { output_v_per_s: s }),
             saturation: c.amplifier.saturation.then_some(SaturationSection {
                 input_range_v: pair(c.amplifier.input_range_v),
                 output_range_v: pair(c.amplifier.output_range_v),
@@ -312,8 +342,14 @@ impl ModelFile {
             dac: self.converters.dac,
             amplifier: AmplifierConfig {
                 gain: self.amplifier.gain,
-                input_range_v: sat.map_or((params::AMP_INPUT_MIN_V, params::AMP_INPUT_MAX_V), |s| pair(s.input_range_v)),
-                output_range_v: sat.map_or((params::AMP_OUTPUT_MIN_V, params::AMP_OUTPUT_MAX_V), |s| pair(s.output_range_v)),
+                input_range_v: sat
+                    .map_or((params::AMP_INPUT_MIN_V, params::AMP_INPUT_MAX_V), |s| {
+                        pair(s.input_range_v)
+                    }),
+                output_range_v: sat
+                    .map_or((params::AMP_OUTPUT_MIN_V, params::AMP_OUTPUT_MAX_V), |s| {
+                        pair(s.output_range_v)
+                    }),
                 slew_v_per_s: self.slew_rate_limit.as_ref().map(|s| s.output_v_per_s),
                 saturation: sat.is_some(),
             },
@@ -347,8 +383,77 @@ impl ModelFile {
         }
     }
 
-    /// The model-core stage, or an error naming the refused parameter group.
+    /// Checks each table on its own, so that an error names the table and the rule.
+    pub fn check(&self) -> anyhow::Result<()> {
+        let c = self.stage_config();
+        let rate = 1.0 / c.period_s;
+        if !(c.period_s.is_finite()
+            && (params::MIN_SAMPLE_RATE_HZ..=params::MAX_SAMPLE_RATE_HZ * (1.0 + 1e-9))
+                .contains(&rate))
+        {
+            bail!(
+                "period_s = {} must give a rate within 10..200 kHz",
+                c.period_s
+            );
+        }
+        let nyquist = 0.5 * rate;
+        if !(c.static_gain.is_finite() && c.static_gain > 0.05 && c.static_gain < 20.0) {
+            bail!(
+                "[plant] static_gain = {} must be within 0.05..20",
+                c.static_gain
+            );
+        }
+        if !(c.mode.mode_hz > 0.0
+            && c.mode.mode_hz < nyquist
+            && c.mode.damping > 0.0
+            && c.mode.damping <= 10.0)
+        {
+            bail!("[plant] mode_hz must be within 0..{nyquist} Hz and damping within 0..10");
+        }
+        if !(c.delay_s >= 0.0 && c.delay_s <= params::MAX_DELAY_S) {
+            bail!(
+                "[time-delay] delay_s = {} must be within 0..{} s",
+                c.delay_s,
+                params::MAX_DELAY_S
+            );
+        }
+        if let Some(p) = c.amp_pole_hz
+            && !(p > 0.0 && p < 10.0 * nyquist)
+        {
+            bail!(
+                "[amplifier-pole] pole_hz = {p} must be within 0..{} Hz",
+                10.0 * nyquist
+            );
+        }
+        if let Some(m) = c.second_mode
+            && !(m.mode_hz > 0.0 && m.mode_hz < nyquist && m.damping > 0.0 && m.damping <= 10.0)
+        {
+            bail!("[resonance] mode_hz must be within 0..{nyquist} Hz and damping within 0..10");
+        }
+        if let Some(d) = c.drift {
+            d.validate().map_err(|e| {
+                anyhow::anyhow!(
+                    "[drift]: {e} (time constants 1 us..1e5 s, gains within +-1, K(u) u increasing)"
+                )
+            })?;
+        }
+        if let Some(g) = c.nonlinear_gain {
+            g.validate().map_err(|e| {
+                anyhow::anyhow!("[nonlinear-gain]: {e} (K' within 0.2..5, K'(u) u increasing)")
+            })?;
+        }
+        c.amplifier
+            .validate()
+            .map_err(|e| anyhow::anyhow!("[amplifier] / [slew-rate-limit] / [saturation]: {e} (gain 1..100, slew 15..1500 V/ms, ranges inside -2..12 V in and -20..120 V out)"))?;
+        model_core::sensor::Sensor::new(&c.sensor).map_err(|e| {
+            anyhow::anyhow!("[converters]: {e} (sensor_gain 0.1..10, noise_v 0..1 V)")
+        })?;
+        Ok(())
+    }
+
+    /// The model-core stage, or an error naming the refused table.
     pub fn build_stage(&self) -> anyhow::Result<Stage> {
+        self.check()?;
         Stage::new(&self.stage_config()).map_err(|e| anyhow::anyhow!("invalid model: {e}"))
     }
 }

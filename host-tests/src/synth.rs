@@ -83,24 +83,48 @@ pub struct SynthArgs {
 
 impl SynthArgs {
     fn check(&self) -> anyhow::Result<()> {
-        ensure!(self.seconds.is_finite() && self.seconds > 0.0 && self.seconds <= 3600.0, "--seconds must be within (0, 3600]");
-        ensure!(self.rate.is_finite() && (10.0..=1e6).contains(&self.rate), "--rate must be within 10 Hz..1 MHz");
-        ensure!(self.seconds * self.rate <= 5e7, "record too long: at most 5e7 samples");
-        ensure!(self.seconds * self.rate >= 2.0, "record too short: fewer than 2 samples");
-        ensure!(self.amplitude.is_finite() && self.offset.is_finite(), "--amplitude and --offset must be finite");
+        ensure!(
+            self.seconds.is_finite() && self.seconds > 0.0 && self.seconds <= 3600.0,
+            "--seconds must be within (0, 3600]"
+        );
+        ensure!(
+            self.rate.is_finite() && (10.0..=1e6).contains(&self.rate),
+            "--rate must be within 10 Hz..1 MHz"
+        );
+        ensure!(
+            self.seconds * self.rate <= 5e7,
+            "record too long: at most 5e7 samples"
+        );
+        ensure!(
+            self.seconds * self.rate >= 2.0,
+            "record too short: fewer than 2 samples"
+        );
+        ensure!(
+            self.amplitude.is_finite() && self.offset.is_finite(),
+            "--amplitude and --offset must be finite"
+        );
         ensure!(
             self.offset >= -2.0 && self.offset + self.amplitude <= 12.0 && self.amplitude >= 0.0,
             "the input must stay within the amplifier's -2..12 V: offset {} + amplitude {}",
             self.offset,
             self.amplitude
         );
-        ensure!(self.freq.is_finite() && self.freq > 0.0 && self.freq < self.rate / 2.0, "--freq must be within (0, rate/2)");
-        ensure!(self.freq_end.is_finite() && self.freq_end > 0.0 && self.freq_end < self.rate / 2.0, "--freq-end must be within (0, rate/2)");
+        ensure!(
+            self.freq.is_finite() && self.freq > 0.0 && self.freq < self.rate / 2.0,
+            "--freq must be within (0, rate/2)"
+        );
+        ensure!(
+            self.freq_end.is_finite() && self.freq_end > 0.0 && self.freq_end < self.rate / 2.0,
+            "--freq-end must be within (0, rate/2)"
+        );
         if let Some(h) = self.hold {
             ensure!(h.is_finite() && h > 0.0, "--hold must be positive");
         }
         if let Some(n) = self.noise_v {
-            ensure!(n.is_finite() && (0.0..=1.0).contains(&n), "--noise-v must be within 0..1 V");
+            ensure!(
+                n.is_finite() && (0.0..=1.0).contains(&n),
+                "--noise-v must be within 0..1 V"
+            );
         }
         Ok(())
     }
@@ -136,14 +160,19 @@ pub fn input(a: &SynthArgs, t_s: &[f64]) -> anyhow::Result<Vec<f64>> {
                 o + amp * if p < 0.5 { 2.0 * p } else { 2.0 - 2.0 * p }
             })
             .collect(),
-        Protocol::Sine => t_s.iter().map(|&t| o + amp * 0.5 * (1.0 - (2.0 * PI * f * t).cos())).collect(),
+        Protocol::Sine => t_s
+            .iter()
+            .map(|&t| o + amp * 0.5 * (1.0 - (2.0 * PI * f * t).cos()))
+            .collect(),
         Protocol::Chirp => {
             let k = (a.freq_end - f) / a.seconds;
             t_s.iter()
                 .map(|&t| o + amp * 0.5 * (1.0 - (2.0 * PI * (f * t + 0.5 * k * t * t)).cos()))
                 .collect()
         }
-        Protocol::Forc => bail!("the forc protocol needs the hysteresis identification, which is not merged yet"),
+        Protocol::Forc => {
+            bail!("the forc protocol needs the hysteresis identification, which is not merged yet")
+        }
     })
 }
 

@@ -41,7 +41,9 @@ fn drift_step_responses_match_eq_5_1_to_5_3() {
             last = want;
         }
         let rel = worst / last;
-        println!("drift step {h} V: drift after 30 s {last:.5} V, max |error| {worst:.2e} V ({rel:.2e} of the drift)");
+        println!(
+            "drift step {h} V: drift after 30 s {last:.5} V, max |error| {worst:.2e} V ({rel:.2e} of the drift)"
+        );
         assert!(rel < 2e-5, "step {h} V: relative error {rel}");
     }
     // The 1 V step is eq. 5.1 alone (K(1) = 1 within the printed digits).
@@ -110,7 +112,9 @@ fn stage_matches_the_f64_reference() {
         worst = worst.max((y - yr).abs());
         worst_amp = worst_amp.max((s.signals().amplifier_v as f64 - r.amplifier_v()).abs());
     }
-    println!("stage vs f64 reference, 0.1 s mixed input: max |dy| {worst:.2e} V, max |d amplifier| {worst_amp:.2e} V");
+    println!(
+        "stage vs f64 reference, 0.1 s mixed input: max |dy| {worst:.2e} V, max |d amplifier| {worst_amp:.2e} V"
+    );
     assert!(worst < 2e-4, "{worst}");
     assert!(worst_amp < 1e-4, "{worst_amp}");
 }
@@ -221,13 +225,23 @@ fn each_effect_switches_on_and_off() {
     let base = clean_full();
     // drift: 1 s after a 4 V step the drift adds K(4) 4 G_drift(1 s).
     let on = response(&base, 4.0, 50_000);
-    let off = response(&StageConfig { drift: None, ..base }, 4.0, 50_000);
+    let off = response(
+        &StageConfig {
+            drift: None,
+            ..base
+        },
+        4.0,
+        50_000,
+    );
     let d = (on[49_999] - off[49_999]) as f64;
     let want = step_response(DacCode::from_volts(4.0).volts() as f64, 1.0);
     println!("drift: on - off after 1 s = {d:.5} V, eq. 5.1-5.3 {want:.5} V");
     assert!((d - want).abs() < 1e-4);
     // nonlinear-gain: fast gain at 10 V is 1.1 times the linear one.
-    let base_nd = StageConfig { drift: None, ..base };
+    let base_nd = StageConfig {
+        drift: None,
+        ..base
+    };
     let on = response(&base_nd, 10.0, 2000);
     let off = response(
         &StageConfig {
@@ -272,12 +286,18 @@ fn each_effect_switches_on_and_off() {
         a.signals().amplifier_v,
         b.signals().amplifier_v
     );
-    assert!((a.signals().amplifier_v + 20.0).abs() < 1e-3 && (b.signals().amplifier_v + 50.0).abs() < 0.01);
+    assert!(
+        (a.signals().amplifier_v + 20.0).abs() < 1e-3
+            && (b.signals().amplifier_v + 50.0).abs() < 0.01
+    );
     // time-delay: the first moving sample is the 5th (85 us = 4.25 samples) with it, the 1st
     // without.
     let first = |c: &StageConfig| response(c, 1.0, 20).iter().position(|y| y.abs() > 1e-9);
     let with = first(&base);
-    let without = first(&StageConfig { delay_s: 0.0, ..base });
+    let without = first(&StageConfig {
+        delay_s: 0.0,
+        ..base
+    });
     println!("time-delay: first moving sample {with:?} (85 us) vs {without:?} (none)");
     assert_eq!((with, without), (Some(4), Some(0)));
     // amplifier-pole: without the 2 kHz pole the 10-90 % rise is faster.
@@ -310,7 +330,11 @@ fn each_effect_switches_on_and_off() {
         ..base_nd
     };
     let (y1, y2) = (response(&base_nd, 1.0, 5000), response(&m2, 1.0, 5000));
-    let diff = y1.iter().zip(&y2).map(|(a, b)| (a - b).abs()).fold(0.0f32, f32::max);
+    let diff = y1
+        .iter()
+        .zip(&y2)
+        .map(|(a, b)| (a - b).abs())
+        .fold(0.0f32, f32::max);
     println!(
         "resonance: static {:.5} vs {:.5} V, max transient difference {diff:.4} V",
         y1[4999], y2[4999]
@@ -318,8 +342,15 @@ fn each_effect_switches_on_and_off() {
     assert!((y1[4999] - y2[4999]).abs() < 1e-4 && diff > 0.01);
     // dac: 0.4 mV is below half a DAC LSB (0.61 mV): no motion with the DAC, some without.
     let small = |c: &StageConfig| response(c, 4e-4, 2000)[1999];
-    let no_dac = StageConfig { dac: false, ..base_nd };
-    println!("dac: y for a 0.4 mV command {} V (DAC) vs {} V", small(&base_nd), small(&no_dac));
+    let no_dac = StageConfig {
+        dac: false,
+        ..base_nd
+    };
+    println!(
+        "dac: y for a 0.4 mV command {} V (DAC) vs {} V",
+        small(&base_nd),
+        small(&no_dac)
+    );
     assert!(small(&base_nd) == 0.0 && small(&no_dac) > 0.0);
     // adc: every reading is a whole number of ADC codes.
     let mut adc = base_nd;
@@ -342,7 +373,12 @@ fn each_effect_switches_on_and_off() {
 
 /// Open-loop tracking of `r`: `u = r / 0.79` uncompensated, or the feedforward's command.
 /// Errors over the second half, relative to the 8 V span: (RMS, peak).
-fn track(stage: &Stage, ff: Option<&Feedforward>, r: &dyn Fn(f64) -> f64, seconds: f64) -> (f64, f64) {
+fn track(
+    stage: &Stage,
+    ff: Option<&Feedforward>,
+    r: &dyn Fn(f64) -> f64,
+    seconds: f64,
+) -> (f64, f64) {
     let n = (seconds / T) as usize;
     let mut s = stage.steady_state(0.0);
     let mut fs = ff.map(|f| f.steady_state(0.0));
@@ -379,7 +415,10 @@ fn drift_and_gain_feedforward_cut_open_loop_tracking_error() {
         let p = (t / 6.0).rem_euclid(1.0);
         8.0 * if p < 0.5 { 2.0 * p } else { 2.0 - 2.0 * p }
     };
-    for (name, r) in [("1 Hz sine", &sine as &dyn Fn(f64) -> f64), ("1/6 Hz triangle", &tri)] {
+    for (name, r) in [
+        ("1 Hz sine", &sine as &dyn Fn(f64) -> f64),
+        ("1/6 Hz triangle", &tri),
+    ] {
         let (rms0, pk0) = track(&stage, None, r, 12.0);
         let (rms1, pk1) = track(&stage, Some(&ff), r, 12.0);
         println!(
@@ -448,7 +487,10 @@ fn drift_identified_from_a_synthesised_step() {
 fn stage_refuses_absurd_configurations() {
     let ok = StageConfig::thesis_full();
     let bad = [
-        StageConfig { period_s: 1.0, ..ok },
+        StageConfig {
+            period_s: 1.0,
+            ..ok
+        },
         StageConfig { delay_s: 1.0, ..ok },
         StageConfig {
             static_gain: f64::NAN,

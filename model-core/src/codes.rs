@@ -26,7 +26,8 @@ pub struct AdcCode(pub i16);
 
 impl AdcCode {
     /// Volts per least significant bit: 20 V / 2^16 = 0.305 mV.
-    pub const VOLT_PER_LSB: f32 = (params::CONVERTER_SPAN_V / (1u32 << params::ADC_BITS) as f64) as f32;
+    pub const VOLT_PER_LSB: f32 =
+        (params::CONVERTER_SPAN_V / (1u32 << params::ADC_BITS) as f64) as f32;
     /// Lowest code.
     pub const MIN: Self = Self(i16::MIN);
     /// Highest code.
@@ -65,7 +66,8 @@ pub struct DacCode(i16);
 
 impl DacCode {
     /// Volts per least significant bit: 20 V / 2^14 = 1.221 mV.
-    pub const VOLT_PER_LSB: f32 = (params::CONVERTER_SPAN_V / (1u32 << params::DAC_BITS) as f64) as f32;
+    pub const VOLT_PER_LSB: f32 =
+        (params::CONVERTER_SPAN_V / (1u32 << params::DAC_BITS) as f64) as f32;
     /// Lowest code (-10 V).
     pub const MIN: Self = Self(-(1 << (params::DAC_BITS - 1)));
     /// Highest code (+10 V - 1 LSB).
@@ -86,7 +88,11 @@ impl DacCode {
     /// The code nearest to `volts`, saturated at the rails.
     #[inline]
     pub fn from_volts(volts: f32) -> Self {
-        Self(round_saturate(volts / Self::VOLT_PER_LSB, Self::MIN.0 as i32, Self::MAX.0 as i32) as i16)
+        Self(round_saturate(
+            volts / Self::VOLT_PER_LSB,
+            Self::MIN.0 as i32,
+            Self::MAX.0 as i32,
+        ) as i16)
     }
 
     /// The code's value in volts.
@@ -138,7 +144,10 @@ mod tests {
         assert_eq!(DacCode::from_volts(-100.0), DacCode::MIN);
         assert_eq!(DacCode::from_volts(f32::NAN).value(), 0);
         assert_eq!(DacCode::from_volts(0.6 * DacCode::VOLT_PER_LSB).value(), 1);
-        assert_eq!(DacCode::from_volts(-0.6 * DacCode::VOLT_PER_LSB).value(), -1);
+        assert_eq!(
+            DacCode::from_volts(-0.6 * DacCode::VOLT_PER_LSB).value(),
+            -1
+        );
         assert_eq!(AdcCode::from_volts(10.0), AdcCode::MAX);
         assert_eq!(AdcCode::from_volts(-10.0), AdcCode::MIN);
         assert!(AdcCode::MAX.near_rail(4));
@@ -154,9 +163,15 @@ mod tests {
         for i in -1000..1000 {
             let v = i as f32 * 0.00997;
             let d = DacCode::from_volts(v).volts();
-            assert!((d - v).abs() <= 0.5001 * DacCode::VOLT_PER_LSB, "{v} -> {d}");
+            assert!(
+                (d - v).abs() <= 0.5001 * DacCode::VOLT_PER_LSB,
+                "{v} -> {d}"
+            );
             let a = AdcCode::from_volts(v).volts();
-            assert!((a - v).abs() <= 0.5001 * AdcCode::VOLT_PER_LSB, "{v} -> {a}");
+            assert!(
+                (a - v).abs() <= 0.5001 * AdcCode::VOLT_PER_LSB,
+                "{v} -> {a}"
+            );
         }
         assert!((volts_to_um(10.0) - 12.0).abs() < 1e-5);
         assert!((um_to_volts(12.0) - 10.0).abs() < 1e-5);

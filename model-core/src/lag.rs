@@ -208,7 +208,11 @@ impl LagState {
     /// Bumpless reset: the next command continues from `output_v` (a non-finite value is
     /// ignored and the present command kept).
     pub fn reset_to(&mut self, output_v: f32) {
-        let v = if output_v.is_finite() { output_v } else { self.last_v };
+        let v = if output_v.is_finite() {
+            output_v
+        } else {
+            self.last_v
+        };
         self.reload(v);
         self.last_v = v;
     }
@@ -246,10 +250,23 @@ mod tests {
             LagConfig { kc: -1.0, ..ok },
             LagConfig { kc: 1e9, ..ok },
             LagConfig { kc: f64::NAN, ..ok },
-            LagConfig { pole_rad_s: 0.0, ..ok },
-            LagConfig { zero_rad_s: 1e6, ..ok },
-            LagConfig { period_s: 1e-3, ..ok },
-            LagConfig { min_v: 5.0, max_v: 1.0, ..ok },
+            LagConfig {
+                pole_rad_s: 0.0,
+                ..ok
+            },
+            LagConfig {
+                zero_rad_s: 1e6,
+                ..ok
+            },
+            LagConfig {
+                period_s: 1e-3,
+                ..ok
+            },
+            LagConfig {
+                min_v: 5.0,
+                max_v: 1.0,
+                ..ok
+            },
         ] {
             assert!(LagCompensator::new(&bad).is_err(), "{bad:?}");
         }

@@ -78,8 +78,12 @@ impl core::fmt::Display for ConfigError {
     fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
         f.write_str(match self {
             Self::NotFinite => "a parameter is NaN or infinite",
-            Self::BadWindow => "the output window is empty or outside the amplifier input range -2..12 V",
-            Self::BadSlew => "the slew rate must be positive and at most the amplifier's 150 V/ms at its input",
+            Self::BadWindow => {
+                "the output window is empty or outside the amplifier input range -2..12 V"
+            }
+            Self::BadSlew => {
+                "the slew rate must be positive and at most the amplifier's 150 V/ms at its input"
+            }
             Self::BadRate => "the sample rate must be within 10..200 kHz",
             Self::BadGain => "a gain, pole or zero is out of range",
             Self::BadTimeConstant => "a time constant must be positive",
@@ -130,12 +134,18 @@ impl OutputLimits {
     /// Limits from a window in volts and a slew rate in V/s at the amplifier input.
     /// The window must lie inside the amplifier's -2..12 V input range and the slew rate
     /// must not exceed the amplifier's own 150 V/ms.
-    pub fn new(min_v: f64, max_v: f64, slew_v_per_s: f64, period_s: f64) -> Result<Self, ConfigError> {
+    pub fn new(
+        min_v: f64,
+        max_v: f64,
+        slew_v_per_s: f64,
+        period_s: f64,
+    ) -> Result<Self, ConfigError> {
         if !(min_v.is_finite() && max_v.is_finite() && slew_v_per_s.is_finite()) {
             return Err(ConfigError::NotFinite);
         }
         let period_s = check_period(period_s)?;
-        if !(params::AMP_INPUT_MIN_V <= min_v && min_v < max_v && max_v <= params::AMP_INPUT_MAX_V) {
+        if !(params::AMP_INPUT_MIN_V <= min_v && min_v < max_v && max_v <= params::AMP_INPUT_MAX_V)
+        {
             return Err(ConfigError::BadWindow);
         }
         if !(slew_v_per_s > 0.0 && slew_v_per_s <= params::AMP_SLEW_INPUT_V_PER_S * (1.0 + 1e-9)) {
@@ -207,7 +217,10 @@ mod tests {
         assert!((l.slew_v_per_step - 3.0).abs() < 1e-6);
         assert_eq!(l.apply(5.0, f32::NAN), (5.0, Flags::NONFINITE));
         assert_eq!(l.apply(5.0, 9.0).0, 8.0);
-        assert_eq!(l.apply(9.5, 20.0), (10.0, Flags::SLEW_LIMITED | Flags::CLAMPED));
+        assert_eq!(
+            l.apply(9.5, 20.0),
+            (10.0, Flags::SLEW_LIMITED | Flags::CLAMPED)
+        );
         assert_eq!(l.apply(0.5, -1.0), (0.0, Flags::CLAMPED));
         assert_eq!(l.apply(f32::NAN, f32::NAN).0, 0.0);
     }
@@ -215,10 +228,25 @@ mod tests {
     #[test]
     fn refuses_absurd_limits() {
         let t = 20e-6;
-        assert_eq!(OutputLimits::new(0.0, 20.0, 1e5, t), Err(ConfigError::BadWindow));
-        assert_eq!(OutputLimits::new(5.0, 5.0, 1e5, t), Err(ConfigError::BadWindow));
-        assert_eq!(OutputLimits::new(0.0, 10.0, 1e7, t), Err(ConfigError::BadSlew));
-        assert_eq!(OutputLimits::new(0.0, 10.0, f64::NAN, t), Err(ConfigError::NotFinite));
-        assert_eq!(OutputLimits::new(0.0, 10.0, 1e5, 1e-3), Err(ConfigError::BadRate));
+        assert_eq!(
+            OutputLimits::new(0.0, 20.0, 1e5, t),
+            Err(ConfigError::BadWindow)
+        );
+        assert_eq!(
+            OutputLimits::new(5.0, 5.0, 1e5, t),
+            Err(ConfigError::BadWindow)
+        );
+        assert_eq!(
+            OutputLimits::new(0.0, 10.0, 1e7, t),
+            Err(ConfigError::BadSlew)
+        );
+        assert_eq!(
+            OutputLimits::new(0.0, 10.0, f64::NAN, t),
+            Err(ConfigError::NotFinite)
+        );
+        assert_eq!(
+            OutputLimits::new(0.0, 10.0, 1e5, 1e-3),
+            Err(ConfigError::BadRate)
+        );
     }
 }

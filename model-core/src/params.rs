@@ -126,7 +126,7 @@ pub const FAST_GAIN_U_RANGE_V: (f64, f64) = (0.0, 10.0);
 /// already maps to monitor volts; our assumption).
 pub const SENSOR_GAIN: f64 = 1.0;
 /// Default seed of the sensor noise generator (any value; our assumption).
-pub const SENSOR_NOISE_SEED: u64 = 0x5EED_0F_E509;
+pub const SENSOR_NOISE_SEED: u64 = 0x005E_ED0F_E509;
 
 // Second resonance mode (issue #7, "two peaks near 5.7 kHz", sec. 4.1.1): disabled by default.
 /// Frequency of a second stage mode when one is switched on, Hz (our assumption).

@@ -86,7 +86,14 @@ impl LinearPlant {
     /// Discretise. Refuses non-finite or non-positive parameters, damping outside (0, 10],
     /// modes above the Nyquist rate, and delays longer than the delay line.
     pub fn new(c: &LinearPlantConfig) -> Result<Self, ConfigError> {
-        let vals = [c.gain, c.amp_pole_hz, c.mode_hz, c.damping, c.delay_s, c.period_s];
+        let vals = [
+            c.gain,
+            c.amp_pole_hz,
+            c.mode_hz,
+            c.damping,
+            c.delay_s,
+            c.period_s,
+        ];
         if vals.iter().any(|v| !v.is_finite()) {
             return Err(ConfigError::NotFinite);
         }
@@ -200,7 +207,19 @@ mod tests {
     fn refuses_absurd_parameters() {
         let ok = LinearPlantConfig::default();
         assert!(LinearPlant::new(&LinearPlantConfig { delay_s: 1.0, ..ok }).is_err());
-        assert!(LinearPlant::new(&LinearPlantConfig { mode_hz: 40e3, ..ok }).is_err());
-        assert!(LinearPlant::new(&LinearPlantConfig { damping: f64::NAN, ..ok }).is_err());
+        assert!(
+            LinearPlant::new(&LinearPlantConfig {
+                mode_hz: 40e3,
+                ..ok
+            })
+            .is_err()
+        );
+        assert!(
+            LinearPlant::new(&LinearPlantConfig {
+                damping: f64::NAN,
+                ..ok
+            })
+            .is_err()
+        );
     }
 }

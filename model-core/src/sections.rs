@@ -108,6 +108,10 @@ mod tests {
             lag.step(&mut y, 1.0);
         }
         let want = 1.0 - (-1.0f64 / 12.0).exp();
-        assert!(((y.value() as f64 - want) / want).abs() < 1e-5, "{}", y.value());
+        assert!(
+            ((y.value() as f64 - want) / want).abs() < 1e-5,
+            "{}",
+            y.value()
+        );
     }
 }

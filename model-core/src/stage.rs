@@ -69,7 +69,9 @@ use crate::drift::{Drift, DriftConfig, DriftState};
 use crate::gain::{FastGain, FastGainConfig};
 use crate::limits::{ConfigError, check_period};
 use crate::params;
-use crate::plant::{LinearPlant, LinearPlantConfig, MAX_DELAY_SAMPLES, PlantState, continuous_state_space};
+use crate::plant::{
+    LinearPlant, LinearPlantConfig, MAX_DELAY_SAMPLES, PlantState, continuous_state_space,
+};
 use crate::sensor::{Sensor, SensorConfig, SensorState};
 use core::f64::consts::PI;
 
@@ -196,7 +198,11 @@ impl TwoModes {
         if !(m.mode_hz.is_finite() && m.damping.is_finite()) {
             return Err(ConfigError::NotFinite);
         }
-        if !(m.mode_hz > 0.0 && m.mode_hz < 0.5 / p.period_s && m.damping > 0.0 && m.damping <= 10.0) {
+        if !(m.mode_hz > 0.0
+            && m.mode_hz < 0.5 / p.period_s
+            && m.damping > 0.0
+            && m.damping <= 10.0)
+        {
             return Err(ConfigError::BadGain);
         }
         let (a3, b3) = continuous_state_space(p);
@@ -244,12 +250,24 @@ impl TwoModes {
         if let Some(slot) = s.line.get_mut(s.head) {
             *slot = u;
         }
-        let u_new = s.line.get((s.head + n - self.delay_samples) % n).copied().unwrap_or(u);
-        let u_old = s.line.get((s.head + n - self.delay_samples - 1) % n).copied().unwrap_or(u);
+        let u_new = s
+            .line
+            .get((s.head + n - self.delay_samples) % n)
+            .copied()
+            .unwrap_or(u);
+        let u_old = s
+            .line
+            .get((s.head + n - self.delay_samples - 1) % n)
+            .copied()
+            .unwrap_or(u);
         let x = s.x;
         for (i, xi) in s.x.iter_mut().enumerate() {
             let row = &self.phi[i];
-            *xi = row[0] * x[0] + row[1] * x[1] + row[2] * x[2] + row[3] * x[3] + row[4] * x[4]
+            *xi = row[0] * x[0]
+                + row[1] * x[1]
+                + row[2] * x[2]
+                + row[3] * x[3]
+                + row[4] * x[4]
                 + self.gamma_new[i] * u_new
                 + self.gamma_old[i] * u_old;
         }
@@ -338,7 +356,11 @@ impl Stage {
             nonlinear_gain: cfg.nonlinear_gain.as_ref().map(FastGain::new).transpose()?,
             drift: cfg.drift.as_ref().map(|d| Drift::new(d, t)).transpose()?,
             plant: LinearPlant::new(&cfg.plant_config())?,
-            second_mode: cfg.second_mode.as_ref().map(|m| TwoModes::new(&cfg.plant_config(), m)).transpose()?,
+            second_mode: cfg
+                .second_mode
+                .as_ref()
+                .map(|m| TwoModes::new(&cfg.plant_config(), m))
+                .transpose()?,
             sensor: Sensor::new(&cfg.sensor)?,
         })
     }
@@ -356,7 +378,11 @@ impl Stage {
     /// The command as the DAC delivers it.
     #[inline]
     fn dac(&self, u_v: f32) -> f32 {
-        if self.dac { DacCode::from_volts(u_v).volts() } else { u_v }
+        if self.dac {
+            DacCode::from_volts(u_v).volts()
+        } else {
+            u_v
+        }
     }
 
     /// The fast static map for the amplifier output in control-input volts.
@@ -373,7 +399,10 @@ impl Stage {
     /// settled): what the plant's output settles to (before the sensor).
     pub fn static_output(&self, u_v: f32) -> f32 {
         let ue = self.amplifier.static_output(self.dac(u_v)) * self.inv_nominal_gain;
-        let drift = self.drift.as_ref().map_or(0.0, |d| d.output(&d.steady_state(ue)));
+        let drift = self
+            .drift
+            .as_ref()
+            .map_or(0.0, |d| d.output(&d.steady_state(ue)));
         self.fast(ue) + drift
     }
 
@@ -383,7 +412,10 @@ impl Stage {
         let command_v = self.dac(u_v);
         let amplifier = self.amplifier.steady_state(command_v);
         let ue = amplifier.output_v * self.inv_nominal_gain;
-        let drift = self.drift.as_ref().map_or(DriftState::default(), |d| d.steady_state(ue));
+        let drift = self
+            .drift
+            .as_ref()
+            .map_or(DriftState::default(), |d| d.steady_state(ue));
         let fast_v = self.fast(ue);
         let drift_v = self.drift.as_ref().map_or(0.0, |d| d.output(&drift));
         let d = fast_v + drift_v;
@@ -470,7 +502,7 @@ impl Feedforward {
         if !(lo_v.is_finite() && hi_v.is_finite()) {
             return Err(ConfigError::NotFinite);
         }
-        if !(lo_v < hi_v) {
+        if lo_v >= hi_v {
             return Err(ConfigError::BadWindow);
         }
         Ok(Self {
@@ -483,14 +515,22 @@ impl Feedforward {
     /// The state at rest with `u_v` held.
     pub fn steady_state(&self, u_v: f32) -> FeedforwardState {
         FeedforwardState {
-            drift: self.stage.drift.as_ref().map_or(DriftState::default(), |d| d.steady_state(u_v)),
+            drift: self
+                .stage
+                .drift
+                .as_ref()
+                .map_or(DriftState::default(), |d| d.steady_state(u_v)),
         }
     }
 
     /// The command for the wanted output `r_v`. A non-finite `r_v` gives `lo_v`.
     #[inline]
     pub fn step(&self, s: &mut FeedforwardState, r_v: f32) -> f32 {
-        let drift_v = self.stage.drift.as_ref().map_or(0.0, |d| d.output(&s.drift));
+        let drift_v = self
+            .stage
+            .drift
+            .as_ref()
+            .map_or(0.0, |d| d.output(&s.drift));
         let want = r_v - drift_v;
         let (mut a, mut b) = (self.lo_v, self.hi_v);
         let u = if !want.is_finite() || self.stage.fast(a) >= want {

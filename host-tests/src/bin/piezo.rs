@@ -3,7 +3,11 @@
 use clap::{Parser, Subcommand};
 
 #[derive(Parser)]
-#[command(name = "piezo", version, about = "Models and tools for the P-753 / E-505 / E-509 piezo loop")]
+#[command(
+    name = "piezo",
+    version,
+    about = "Models and tools for the P-753 / E-505 / E-509 piezo loop"
+)]
 struct Cli {
     #[command(subcommand)]
     command: Command,

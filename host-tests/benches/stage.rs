@@ -1,0 +1,69 @@
+//! Whole-stage step time (issue #4 item 9: the stage must simulate at >= 10 M steps/s on one
+//! core). Criterion measures `thesis-linear`, `thesis-full` and `thesis-full` with a second
+//! mode; a plain timing of 20 M steps of `thesis-full` prints steps/s.
+
+use criterion::{Criterion, black_box, criterion_group};
+use model_core::params;
+use model_core::stage::{ModeConfig, Stage, StageConfig};
+use std::time::Instant;
+
+fn configs() -> Vec<(&'static str, StageConfig)> {
+    let full = StageConfig::thesis_full();
+    let two = StageConfig {
+        second_mode: Some(ModeConfig {
+            mode_hz: params::SECOND_MODE_HZ,
+            damping: params::SECOND_MODE_DAMPING,
+        }),
+        ..full
+    };
+    vec![
+        ("thesis-linear", StageConfig::thesis_linear()),
+        ("thesis-full", full),
+        ("thesis-full+second-mode", two),
+    ]
+}
+
+fn bench_stage(c: &mut Criterion) {
+    for (name, cfg) in configs() {
+        let stage = Stage::new(&cfg).expect("built-in config");
+        let mut s = stage.steady_state(0.0);
+        let mut k = 0u32;
+        c.bench_function(&format!("stage step {name}"), |b| {
+            b.iter(|| {
+                k = k.wrapping_add(1);
+                // A 1 kHz-ish square wave keeps every branch busy.
+                let u = if k & 0x20 == 0 { 2.0 } else { 7.0 };
+                black_box(stage.step(&mut s, black_box(u)))
+            })
+        });
+    }
+}
+
+fn steps_per_second() {
+    for (name, cfg) in configs() {
+        let stage = Stage::new(&cfg).expect("built-in config");
+        let mut s = stage.steady_state(0.0);
+        let n = 20_000_000u32;
+        let start = Instant::now();
+        let mut acc = 0.0f32;
+        for k in 0..n {
+            let u = if k & 0x20 == 0 { 2.0 } else { 7.0 };
+            acc += stage.step(&mut s, black_box(u));
+        }
+        let dt = start.elapsed().as_secs_f64();
+        black_box(acc);
+        println!(
+            "{name}: {n} steps in {dt:.3} s = {:.1} M steps/s ({:.1} ns/step; target >= 10 M steps/s)",
+            n as f64 / dt / 1e6,
+            dt / n as f64 * 1e9
+        );
+    }
+}
+
+criterion_group!(benches, bench_stage);
+
+fn main() {
+    steps_per_second();
+    benches();
+    Criterion::default().configure_from_args().final_summary();
+}
