@@ -23,5 +23,7 @@ mod board {
 
 #[cfg(not(target_os = "none"))]
 fn main() {
-    eprintln!("the firmware runs on the board: cargo build -p firmware --release --target thumbv7em-none-eabihf");
+    eprintln!(
+        "the firmware runs on the board: cargo build -p firmware --release --target thumbv7em-none-eabihf"
+    );
 }

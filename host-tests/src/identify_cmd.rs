@@ -52,7 +52,7 @@ pub fn run(a: &IdentifyArgs) -> anyhow::Result<()> {
     match &a.target {
         IdentifyTarget::Drift(f) => {
             let (mut model, rec) = load(f)?;
-            let base = model.stage_config().drift.unwrap_or_default();
+            let base = model.stage_config()?.drift.unwrap_or_default();
             let fit = identify_drift(&rec.t_s, &rec.u_v, rec.require_y()?, &base)?;
             let d: DriftConfig = fit.config;
             model.drift = Some(DriftSection {

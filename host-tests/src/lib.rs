@@ -4,12 +4,14 @@
 //! Every verb of `piezo` is a function here; `src/bin/piezo.rs` only parses arguments.
 //! The control maths itself lives in `model-core`; this crate calls it and checks it.
 
+pub mod analysis;
 pub mod identify;
 pub mod identify_cmd;
 pub mod loop_cmd;
 pub mod model_file;
 pub mod record;
 pub mod reference;
+pub mod sim;
 pub mod simulate;
 pub mod synth;
 pub mod testing;

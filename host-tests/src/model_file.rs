@@ -52,16 +52,25 @@
 //! [saturation]                    # effect `saturation`: amplifier ranges
 //! input_range_v = [-2.0, 12.0]
 //! output_range_v = [-20.0, 120.0]
+//!
+//! [hysteresis]                    # effect `hysteresis`: the Everett table
+//! input_range_v = [0.0, 10.0]
+//! offset_v = 0.0
+//! everett_v = [0.0175, 0.0359, ...]  # 990 values: the grid, packed lower triangle
+//! # or, instead of everett_v, the parametric congruent-loop form:
+//! # dc_gain = 0.79
+//! # loop_width_frac = 0.185
 //! ```
 //! The built-in names are `thesis-linear` (eq. 4.4 alone: plant, `time-delay`,
 //! `amplifier-pole`; no converters, no noise) and `thesis-full` (the ch. 6 overall model: all of
-//! the above but `resonance`, with converters and the thesis' 2.5 mV noise). Wherever a model
+//! the above but `resonance`, with the default hysteresis table stored as its grid, converters and the thesis' 2.5 mV noise). Wherever a model
 //! is asked for, a path or a built-in name is accepted ([`ModelFile::load`]).
 
 use anyhow::{Context, bail};
 use model_core::amplifier::AmplifierConfig;
 use model_core::drift::DriftConfig;
 use model_core::gain::FastGainConfig;
+use model_core::hysteresis::HysteresisTable;
 use model_core::params;
 use model_core::sensor::SensorConfig;
 use model_core::stage::{ModeConfig, Stage, StageConfig};
@@ -165,6 +174,64 @@ pub struct SlewSection {
     pub output_v_per_s: f64,
 }
 
+/// `[hysteresis]`: the Everett table of [`model_core::hysteresis`], either as its grid
+/// (`everett_v`, the packed lower triangle, [`model_core::hysteresis::TABLE_LEN`] values) or in
+/// the parametric congruent-loop form (`dc_gain` and `loop_width_frac`, see
+/// [`HysteresisTable::quadratic_everett`]); exactly one of the two.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct HysteresisSection {
+    /// Input range of the table, volts at the amplifier input.
+    pub input_range_v: [f64; 2],
+    /// Output at the bottom of the range, sensor volts.
+    pub offset_v: f64,
+    /// Parametric form: average gain over the major loop.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub dc_gain: Option<f64>,
+    /// Parametric form: largest loop width as a fraction of the output span.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub loop_width_frac: Option<f64>,
+    /// Grid form: the packed Everett values, sensor volts.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub everett_v: Option<Vec<f32>>,
+}
+
+impl HysteresisSection {
+    /// The grid form of `t`.
+    pub fn from_table(t: &HysteresisTable) -> Self {
+        let (lo, hi) = t.input_range_v();
+        Self {
+            input_range_v: [lo as f64, hi as f64],
+            offset_v: t.offset_v() as f64,
+            dc_gain: None,
+            loop_width_frac: None,
+            everett_v: Some(t.everett_grid_v().to_vec()),
+        }
+    }
+
+    /// The table, or an error naming the problem.
+    pub fn table(&self) -> anyhow::Result<HysteresisTable> {
+        let [lo, hi] = self.input_range_v;
+        let r = match (&self.everett_v, self.dc_gain, self.loop_width_frac) {
+            (Some(e), None, None) => {
+                HysteresisTable::from_grid(lo as f32, hi as f32, self.offset_v as f32, e)
+            }
+            (None, Some(g), Some(w)) => {
+                HysteresisTable::quadratic_everett(lo, hi, self.offset_v, g, w)
+            }
+            _ => bail!(
+                "[hysteresis] needs either `everett_v` (the grid) or both `dc_gain` and `loop_width_frac`"
+            ),
+        };
+        r.map_err(|e| {
+            anyhow::anyhow!(
+                "[hysteresis]: {e} (grid of {} values, non-negative, rising in alpha and falling in beta; range inside -2..12 V)",
+                model_core::hysteresis::TABLE_LEN
+            )
+        })
+    }
+}
+
 /// `[saturation]`.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -227,6 +294,9 @@ pub struct ModelFile {
     /// `saturation`.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub saturation: Option<SaturationSection>,
+    /// `hysteresis` (last: its grid is long).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub hysteresis: Option<HysteresisSection>,
 }
 
 impl ModelFile {
@@ -330,15 +400,23 @@ impl ModelFile {
                 input_range_v: pair(c.amplifier.input_range_v),
                 output_range_v: pair(c.amplifier.output_range_v),
             }),
+            hysteresis: c.hysteresis.as_ref().map(HysteresisSection::from_table),
         }
     }
 
-    /// The stage configuration this file describes (not yet checked: see [`Self::build_stage`]).
-    pub fn stage_config(&self) -> StageConfig {
+    /// The stage configuration this file describes; the hysteresis table is checked here, the
+    /// rest by [`Self::build_stage`].
+    pub fn stage_config(&self) -> anyhow::Result<StageConfig> {
+        let hysteresis = self
+            .hysteresis
+            .as_ref()
+            .map(HysteresisSection::table)
+            .transpose()?;
         let pair = |p: [f64; 2]| (p[0], p[1]);
         let sat = self.saturation.as_ref();
-        StageConfig {
+        Ok(StageConfig {
             period_s: self.period_s,
+            hysteresis,
             dac: self.converters.dac,
             amplifier: AmplifierConfig {
                 gain: self.amplifier.gain,
@@ -380,12 +458,12 @@ impl ModelFile {
                 adc: self.converters.adc,
                 seed: self.converters.seed,
             },
-        }
+        })
     }
 
     /// Checks each table on its own, so that an error names the table and the rule.
     pub fn check(&self) -> anyhow::Result<()> {
-        let c = self.stage_config();
+        let c = self.stage_config()?;
         let rate = 1.0 / c.period_s;
         if !(c.period_s.is_finite()
             && (params::MIN_SAMPLE_RATE_HZ..=params::MAX_SAMPLE_RATE_HZ * (1.0 + 1e-9))
@@ -454,6 +532,6 @@ impl ModelFile {
     /// The model-core stage, or an error naming the refused table.
     pub fn build_stage(&self) -> anyhow::Result<Stage> {
         self.check()?;
-        Stage::new(&self.stage_config()).map_err(|e| anyhow::anyhow!("invalid model: {e}"))
+        Stage::new(&self.stage_config()?).map_err(|e| anyhow::anyhow!("invalid model: {e}"))
     }
 }

@@ -36,10 +36,13 @@
 //!
 //! # Limits and anti-windup
 //! The command passes through [`OutputLimits::apply`] (NaN guard, slew limit, window). When
-//! the command is limited, the integrator takes back the difference (`v += out - raw`): the
-//! state then describes the command actually sent, so the integrator cannot wind up during a
-//! long saturation or a slewing edge, and the output leaves the limit as soon as the error
-//! changes sign (integrator clamping, the back-calculation gain being 1 per sample).
+//! the command is limited, the step's update of the lag state `w` is undone (conditional
+//! integration) and the integrator is set so that `v + w` equals the command actually sent.
+//! Both matter: with the integrator alone clamped, the lag state (gain `Kc (p - z)/p = -15000`
+//! at DC, time constant 2.5 s) would charge to thousands of volts during a long saturation and
+//! hold the output at the clamp for seconds after the error reverses. With both, the states
+//! always describe the sent command and the output leaves the limit as soon as the error
+//! changes sign.
 //!
 //! # Hold and reset
 //! [`LagState::hold`] freezes the states and the command; releasing continues from the same
@@ -158,6 +161,7 @@ impl LagCompensator {
         }
         let e_sum = error_v + state.e_prev;
         state.e_prev = error_v;
+        let lag_before = state.lag;
         state.integ.add(self.int_gain * e_sum);
         let w = state.lag.value();
         state.lag.add(self.lag_gain * e_sum - self.lag_alpha * w);
@@ -167,8 +171,12 @@ impl LagCompensator {
             // The states overflowed: restart them from the last safe command.
             state.reload(state.last_v);
         } else if out != raw {
-            // Anti-windup: the integrator takes back what the limits removed.
-            state.integ.add(out - raw);
+            // Anti-windup: the lag state keeps its value from before this step and the
+            // integrator takes up the rest, so the states describe the command really sent.
+            state.lag = lag_before;
+            state
+                .integ
+                .add(out - (state.integ.value() + state.lag.value()));
         }
         state.last_v = out;
         (out, flags)

@@ -20,6 +20,9 @@
 //! * [`limits`]: window, slew limit and NaN guard at the last stage.
 //! * [`lag`]: the lag compensator with its free integrator (eq. 4.5).
 //! * [`plant`]: the linear plant of eq. 4.4 as an exact fixed-step simulator.
+//! * [`controller`]: the one per-sample function the firmware's interrupt and the QEMU runs
+//!   call: modes, faults, compensator, limits.
+//! * [`hysteresis`]: the static hysteretic map (Everett table) with its turning-point memory.
 //! * [`drift`], [`gain`], [`amplifier`], [`sensor`]: the non-linear blocks of ch. 5.
 //! * [`stage`]: the ch. 6 overall model composed of all blocks (the wiring is stated there).
 //!
@@ -31,9 +34,11 @@
 
 pub mod amplifier;
 pub mod codes;
+pub mod controller;
 pub mod discretize;
 pub mod drift;
 pub mod gain;
+pub mod hysteresis;
 pub mod lag;
 pub mod limits;
 pub mod params;

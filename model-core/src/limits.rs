@@ -72,6 +72,8 @@ pub enum ConfigError {
     BadGain,
     /// A time constant is not positive.
     BadTimeConstant,
+    /// A table has the wrong size or breaks a required monotonicity.
+    BadTable,
 }
 
 impl core::fmt::Display for ConfigError {
@@ -87,6 +89,7 @@ impl core::fmt::Display for ConfigError {
             Self::BadRate => "the sample rate must be within 10..200 kHz",
             Self::BadGain => "a gain, pole or zero is out of range",
             Self::BadTimeConstant => "a time constant must be positive",
+            Self::BadTable => "a table has the wrong size or is not monotone",
         })
     }
 }

@@ -91,6 +91,52 @@ pub const RECOMPUTED_CROSSOVER_RAD_S: f64 = 3076.0;
 /// Recomputed closed-loop -3 dB bandwidth, Hz.
 pub const RECOMPUTED_BANDWIDTH_HZ: f64 = 1001.0;
 
+// ----- Fault detection in the controller (our assumptions). -----
+/// Lowest plausible sensor reading, volts: the E-509 monitor spans 0..10 V (sec. 2.4); half a
+/// volt below means a broken or disconnected sensor.
+pub const SENSOR_VALID_MIN_V: f64 = -0.5;
+/// Highest plausible sensor reading, volts (over-range above this).
+pub const SENSOR_VALID_MAX_V: f64 = 10.5;
+/// A sensor is stuck if its code does not change at all for this many samples (5 ms at
+/// 50 kHz) while the command moves by more than [`SENSOR_STUCK_COMMAND_V`]. A live E-509 shows
+/// +-2.5 mV of noise, about 8 ADC codes, so a frozen code with a moving command is a fault.
+pub const SENSOR_STUCK_SAMPLES: u32 = 250;
+/// Command movement that must show on the sensor, volts at the amplifier input (moves the
+/// stage by about 80 mV of monitor signal, 260 ADC codes).
+pub const SENSOR_STUCK_COMMAND_V: f64 = 0.1;
+// ----- Hysteresis table (sec. 3.2, 5.3; issue #4). -----
+/// Nodes per axis of the Everett grid (turning-up value alpha, turning-down value beta).
+/// The table stores the strictly lower triangle alpha > beta: 45 * 44 / 2 = 990 `f32`, so the
+/// whole table is 3980 bytes, under the 4 KiB budget of issue #4 (our assumption).
+pub const HYST_GRID_NODES: usize = 45;
+/// Turning points the memory keeps, the bottom of the range included (our assumption: a
+/// history of 15 nested minor loops; beyond that the two innermost are merged).
+pub const HYST_MEMORY_DEPTH: usize = 32;
+/// Fixed bisection steps of the inverse: 10 V / 2^24 = 0.6 uV, below the `f32` spacing at
+/// 10 V (our assumption).
+pub const HYST_INVERSE_ITERATIONS: u32 = 24;
+/// Lower edge of the default table's input range, volts at the amplifier input (the safe
+/// window; our assumption).
+pub const HYST_DEFAULT_INPUT_MIN_V: f64 = SAFE_WINDOW_MIN_V;
+/// Upper edge of the default table's input range (the safe window; our assumption).
+pub const HYST_DEFAULT_INPUT_MAX_V: f64 = SAFE_WINDOW_MAX_V;
+/// Output at the bottom of the range after coming down to it, sensor volts (our assumption:
+/// the sensor's zero is set there).
+pub const HYST_DEFAULT_OFFSET_V: f64 = 0.0;
+/// Average static gain over the full major loop, sensor V per input V (eq. 4.4's 0.79).
+pub const HYST_DEFAULT_DC_GAIN: f64 = PLANT_GAIN;
+/// Largest vertical width of the full-amplitude loop as a fraction of the output span. Sec.
+/// 3.2 gives 15-20 % of range and about 9-10 deg of phase lag at 1 Hz; for a loop whose
+/// shape depends on amplitude only (congruent loops, sec. 3.2: "same-amplitude loops look
+/// alike at different offsets") these two figures are tied (about 0.48 deg per %), so 15 %
+/// gives 7.3 deg. We take 18.5 %, inside the thesis' band, which gives 9.0 deg (our
+/// assumption; the phase lag is measured in host-tests).
+pub const HYST_DEFAULT_LOOP_WIDTH_FRAC: f64 = 0.185;
+/// Spacing of the turning values of the first-order reversal curves (sec. 5.3.4).
+pub const HYST_FORC_STEP_V: f64 = 0.15;
+/// Frequency of the preconditioning sinusoid (sec. 5.3.4).
+pub const HYST_FORC_PRECONDITION_HZ: f64 = 1.0;
+
 // =====================================================================================
 // ----- The non-linear stage (issue #4): drift, fast gain, amplifier model, sensor model. -----
 // =====================================================================================

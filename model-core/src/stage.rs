@@ -51,7 +51,7 @@
 //! Every effect the model-gap workflow (issue #7) names is a field of [`StageConfig`]:
 //! `time-delay` = `delay_s` (0 is off), `amplifier-pole` = `amp_pole_hz` (`None` is off),
 //! `resonance` = `second_mode` (the stage's own mode is always there), `drift` = `drift`,
-//! `hysteresis` = the table passed to [`Stage::new`], `nonlinear-gain` = `nonlinear_gain`,
+//! `hysteresis` = `hysteresis` (the table), `nonlinear-gain` = `nonlinear_gain`,
 //! `slew-rate-limit` = `amplifier.slew_v_per_s`, `saturation` = `amplifier.saturation`.
 //! The converters are `dac` and `sensor.adc`, the noise `sensor.noise_v`.
 //!
@@ -67,6 +67,7 @@ use crate::codes::DacCode;
 use crate::discretize::zoh_delayed;
 use crate::drift::{Drift, DriftConfig, DriftState};
 use crate::gain::{FastGain, FastGainConfig};
+use crate::hysteresis::{HysteresisMemory, HysteresisTable};
 use crate::limits::{ConfigError, check_period};
 use crate::params;
 use crate::plant::{
@@ -96,6 +97,8 @@ pub struct StageConfig {
     /// Static gain of the fast part without hysteresis, sensor volts per volt (0.79, eq. 4.4).
     /// With a hysteresis table the table's own curve replaces it.
     pub static_gain: f64,
+    /// The hysteresis table (`hysteresis`; `None`: the fast part is `static_gain * ue`).
+    pub hysteresis: Option<HysteresisTable>,
     /// K'(u), the fast part's amplitude-dependent gain (`nonlinear-gain`).
     pub nonlinear_gain: Option<FastGainConfig>,
     /// The drift branch (`drift`).
@@ -126,6 +129,7 @@ impl StageConfig {
                 ..AmplifierConfig::default()
             },
             static_gain: params::PLANT_GAIN,
+            hysteresis: None,
             nonlinear_gain: None,
             drift: None,
             amp_pole_hz: Some(params::AMP_POLE_HZ),
@@ -143,12 +147,13 @@ impl StageConfig {
         }
     }
 
-    /// The ch. 6 overall model without its hysteresis table (which [`Stage::new`] takes
-    /// separately): eq. 4.4 plus drift, K'(u), the amplifier's ranges and slew limiter, the
-    /// converters and the sensor noise.
+    /// The ch. 6 overall model: eq. 4.4 plus the default hysteresis table
+    /// ([`HysteresisTable::thesis_default`]), drift, K'(u), the amplifier's ranges and slew
+    /// limiter, the converters and the sensor noise.
     pub fn thesis_full() -> Self {
         Self {
             dac: true,
+            hysteresis: Some(HysteresisTable::thesis_default()),
             amplifier: AmplifierConfig::default(),
             nonlinear_gain: Some(FastGainConfig::default()),
             drift: Some(DriftConfig::default()),
@@ -282,6 +287,7 @@ pub struct Stage {
     amplifier: Amplifier,
     inv_nominal_gain: f32,
     static_gain: f32,
+    hysteresis: Option<HysteresisTable>,
     nonlinear_gain: Option<FastGain>,
     drift: Option<Drift>,
     plant: LinearPlant,
@@ -290,9 +296,11 @@ pub struct Stage {
 }
 
 /// Everything the stage remembers between steps, and the signals of the last step.
-#[derive(Clone, Copy, Debug, PartialEq)]
+/// (`Clone`, not `Copy`: the hysteresis memory is a bounded `heapless` stack.)
+#[derive(Clone, Debug, PartialEq)]
 pub struct StageState {
     amplifier: AmplifierState,
+    hysteresis: HysteresisMemory,
     drift: DriftState,
     plant: PlantState,
     second_mode: TwoModesState,
@@ -353,6 +361,7 @@ impl Stage {
             amplifier: Amplifier::new(&cfg.amplifier, t)?,
             inv_nominal_gain: (1.0 / params::AMP_GAIN) as f32,
             static_gain: cfg.static_gain as f32,
+            hysteresis: cfg.hysteresis,
             nonlinear_gain: cfg.nonlinear_gain.as_ref().map(FastGain::new).transpose()?,
             drift: cfg.drift.as_ref().map(|d| Drift::new(d, t)).transpose()?,
             plant: LinearPlant::new(&cfg.plant_config())?,
@@ -385,28 +394,54 @@ impl Stage {
         }
     }
 
-    /// The fast static map for the amplifier output in control-input volts.
+    /// K'(u) times `h`, or `h` without the non-linear gain.
     #[inline]
-    fn fast(&self, ue_v: f32) -> f32 {
-        let h = self.static_gain * ue_v;
+    fn scale(&self, ue_v: f32, h: f32) -> f32 {
         match &self.nonlinear_gain {
             Some(g) => g.gain(ue_v) * h,
             None => h,
         }
     }
 
+    /// The fast static map without hysteresis (`static_gain K'(ue) ue`).
+    #[inline]
+    fn fast_memoryless(&self, ue_v: f32) -> f32 {
+        self.scale(ue_v, self.static_gain * ue_v)
+    }
+
+    /// The fast static map for the amplifier output in control-input volts; advances the
+    /// hysteresis memory.
+    #[inline]
+    fn fast(&self, mem: &mut HysteresisMemory, ue_v: f32) -> f32 {
+        match &self.hysteresis {
+            Some(t) => self.scale(ue_v, t.forward(mem, ue_v)),
+            None => self.fast_memoryless(ue_v),
+        }
+    }
+
     /// The static displacement, sensor volts, reached with `u_v` held for ever (drift
-    /// settled): what the plant's output settles to (before the sensor).
+    /// settled; with hysteresis: on the major rising curve, as after [`Self::steady_state`]):
+    /// what the plant's output settles to (before the sensor).
     pub fn static_output(&self, u_v: f32) -> f32 {
         let ue = self.amplifier.static_output(self.dac(u_v)) * self.inv_nominal_gain;
         let drift = self
             .drift
             .as_ref()
             .map_or(0.0, |d| d.output(&d.steady_state(ue)));
-        self.fast(ue) + drift
+        let mut mem = HysteresisMemory::new();
+        if let Some(t) = &self.hysteresis {
+            mem.reset(t, ue);
+        }
+        self.fast(&mut mem, ue) + drift
     }
 
-    /// A state at rest with `u_v` held for ever (drift settled, sensor noise from the seed).
+    /// The hysteresis table, if on.
+    pub fn hysteresis(&self) -> Option<&HysteresisTable> {
+        self.hysteresis.as_ref()
+    }
+
+    /// A state at rest with `u_v` held for ever (drift settled, hysteresis on the major rising
+    /// curve as after coming up from the bottom of its range, sensor noise from the seed).
     pub fn steady_state(&self, u_v: f32) -> StageState {
         let u_v = if u_v.is_finite() { u_v } else { 0.0 };
         let command_v = self.dac(u_v);
@@ -416,11 +451,16 @@ impl Stage {
             .drift
             .as_ref()
             .map_or(DriftState::default(), |d| d.steady_state(ue));
-        let fast_v = self.fast(ue);
+        let mut hysteresis = HysteresisMemory::new();
+        if let Some(t) = &self.hysteresis {
+            hysteresis.reset(t, ue);
+        }
+        let fast_v = self.fast(&mut hysteresis, ue);
         let drift_v = self.drift.as_ref().map_or(0.0, |d| d.output(&drift));
         let d = fast_v + drift_v;
         StageState {
             amplifier,
+            hysteresis,
             drift,
             plant: self.plant.steady_state(d),
             second_mode: match &self.second_mode {
@@ -447,7 +487,7 @@ impl Stage {
         let command_v = self.dac(u_v);
         let amplifier_v = self.amplifier.step(&mut s.amplifier, command_v);
         let ue = amplifier_v * self.inv_nominal_gain;
-        let fast_v = self.fast(ue);
+        let fast_v = self.fast(&mut s.hysteresis, ue);
         let drift_v = match &self.drift {
             Some(d) => d.step(&mut s.drift, ue),
             None => 0.0,
@@ -475,9 +515,14 @@ impl Stage {
 /// Per step, with `r` the wanted output (sensor volts):
 /// 1. the drift the model predicts from the commands already sent is `D` (its own copy of the
 ///    drift branch, driven by its own output, so no sensor is needed);
-/// 2. the fast part must supply `r - D`; the command is the inverse of the fast static map
-///    (`0.79 K'(u) u`, strictly increasing by [`FastGainConfig::validate`]) at that value, found
-///    by bisection over the amplifier's input range (32 halvings: bounded, below 1 uV);
+/// 2. the fast part must supply `r - D`; the command is the inverse of the fast static map at
+///    that value:
+///    * without hysteresis, `0.79 K'(u) u` (strictly increasing by [`FastGainConfig::validate`])
+///      is inverted by bisection over `[lo_v, hi_v]` (32 halvings: bounded, below 1 uV);
+///    * with hysteresis, `K'(u) H(u)`: the table's own inverse
+///      ([`HysteresisTable::inverse`], its own memory kept in step) is asked for
+///      `(r - D) / K'(u_last)`, with K' taken at the last command (K' changes by under 1e-5 per
+///      step at 1500 V/ms, so the lag is invisible), then clamped to `[lo_v, hi_v]`;
 /// 3. the drift branch is advanced with that command.
 ///
 /// The drift estimate is one step old when the command is computed (no algebraic loop); its
@@ -489,10 +534,12 @@ pub struct Feedforward {
     hi_v: f32,
 }
 
-/// The feedforward's own drift state.
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
+/// The feedforward's own drift state, hysteresis memory and last command.
+#[derive(Clone, Debug, Default, PartialEq)]
 pub struct FeedforwardState {
     drift: DriftState,
+    hysteresis: HysteresisMemory,
+    last_v: f32,
 }
 
 impl Feedforward {
@@ -514,7 +561,13 @@ impl Feedforward {
 
     /// The state at rest with `u_v` held.
     pub fn steady_state(&self, u_v: f32) -> FeedforwardState {
+        let mut hysteresis = HysteresisMemory::new();
+        if let Some(t) = &self.stage.hysteresis {
+            hysteresis.reset(t, u_v);
+        }
         FeedforwardState {
+            hysteresis,
+            last_v: u_v,
             drift: self
                 .stage
                 .drift
@@ -533,14 +586,20 @@ impl Feedforward {
             .map_or(0.0, |d| d.output(&s.drift));
         let want = r_v - drift_v;
         let (mut a, mut b) = (self.lo_v, self.hi_v);
-        let u = if !want.is_finite() || self.stage.fast(a) >= want {
+        let st = &self.stage;
+        let u = if let Some(t) = &st.hysteresis {
+            let k = st.scale(s.last_v, 1.0);
+            let u = t.inverse(&mut s.hysteresis, want / k);
+            // The table clamps to its own range; the window may be narrower.
+            u.max(a).min(b)
+        } else if !want.is_finite() || st.fast_memoryless(a) >= want {
             a
-        } else if self.stage.fast(b) <= want {
+        } else if st.fast_memoryless(b) <= want {
             b
         } else {
             for _ in 0..32 {
                 let m = 0.5 * (a + b);
-                if self.stage.fast(m) < want {
+                if st.fast_memoryless(m) < want {
                     a = m;
                 } else {
                     b = m;
@@ -548,6 +607,7 @@ impl Feedforward {
             }
             0.5 * (a + b)
         };
+        s.last_v = u;
         if let Some(d) = &self.stage.drift {
             d.step(&mut s.drift, u);
         }

@@ -5,4 +5,6 @@
 pub mod amplifier;
 pub mod drift;
 pub mod gain;
+pub mod hysteresis_truth;
+pub mod lag;
 pub mod stage;
