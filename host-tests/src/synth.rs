@@ -14,8 +14,11 @@
 //! * `sine`: `offset + amplitude (1 - cos(2 pi freq t)) / 2` (starts at rest).
 //! * `chirp`: the same with the frequency swept linearly from `--freq` to `--freq-end`.
 //! * `forc`: first-order reversal curves as the thesis recorded them (sec. 5.3.4), from the
-//!   hysteresis identification's protocol generator.
+//!   hysteresis identification's generator [`forc_protocol`]: preconditioning sine at `--freq`
+//!   (1 Hz in the thesis), turning values every 0.15 V over `offset..offset + amplitude`,
+//!   10 V/s ramps; the record is as long as the protocol needs (`--seconds` is ignored).
 
+use crate::identify::hysteresis::{ForcProtocol, forc_protocol};
 use crate::model_file::ModelFile;
 use crate::record::Record;
 use crate::simulate::simulate;
@@ -61,7 +64,7 @@ pub struct SynthArgs {
     /// Record sampling rate, Hz.
     #[arg(long, default_value_t = 50_000.0)]
     pub rate: f64,
-    /// Span of the input above the offset, volts.
+    /// Span of the input above the offset, volts (forc: use 10 for the 0..10 V table).
     #[arg(long, default_value_t = 6.0)]
     pub amplitude: f64,
     /// Lowest input, volts.
@@ -170,9 +173,7 @@ pub fn input(a: &SynthArgs, t_s: &[f64]) -> anyhow::Result<Vec<f64>> {
                 .map(|&t| o + amp * 0.5 * (1.0 - (2.0 * PI * (f * t + 0.5 * k * t * t)).cos()))
                 .collect()
         }
-        Protocol::Forc => {
-            bail!("the forc protocol needs the hysteresis identification, which is not merged yet")
-        }
+        Protocol::Forc => bail!("the forc protocol defines its own sample times"),
     })
 }
 
@@ -185,9 +186,24 @@ pub fn synth(a: &SynthArgs) -> anyhow::Result<Record> {
         model.converters.noise_v = n;
     }
     let stage = model.build_stage()?;
-    let n = (a.seconds * a.rate).round() as usize;
-    let t_s: Vec<f64> = (0..n).map(|i| i as f64 / a.rate).collect();
-    let u_v = input(a, &t_s)?;
+    let (t_s, u_v) = if a.protocol == Protocol::Forc {
+        let p = ForcProtocol {
+            rate_hz: a.rate,
+            u_min_v: a.offset,
+            u_max_v: a.offset + a.amplitude,
+            precondition_hz: a.freq,
+            ..ForcProtocol::default()
+        };
+        let u = forc_protocol(&p)?;
+        ensure!(u.len() >= 2, "the FORC protocol gave fewer than 2 samples");
+        let t: Vec<f64> = (0..u.len()).map(|i| i as f64 / a.rate).collect();
+        (t, u)
+    } else {
+        let n = (a.seconds * a.rate).round() as usize;
+        let t_s: Vec<f64> = (0..n).map(|i| i as f64 / a.rate).collect();
+        let u_v = input(a, &t_s)?;
+        (t_s, u_v)
+    };
     let y = simulate(&stage, model.period_s, &t_s, &u_v);
     Ok(Record::new(t_s, u_v, Some(y), None)?)
 }
