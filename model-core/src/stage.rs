@@ -414,7 +414,16 @@ impl Stage {
     #[inline]
     fn fast(&self, mem: &mut HysteresisMemory, ue_v: f32) -> f32 {
         match &self.hysteresis {
-            Some(t) => self.scale(ue_v, t.forward(mem, ue_v)),
+            Some(t) => {
+                // A held input (holds, or a slow signal between two DAC codes) changes nothing
+                // in the table's memory: reuse its last output instead of a look-up.
+                let h = if ue_v == mem.input_v() && mem.depth() > 0 {
+                    mem.output_v()
+                } else {
+                    t.forward(mem, ue_v)
+                };
+                self.scale(ue_v, h)
+            }
             None => self.fast_memoryless(ue_v),
         }
     }
