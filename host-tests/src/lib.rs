@@ -6,8 +6,13 @@
 
 pub mod analysis;
 pub mod identify;
+pub mod identify_cmd;
 pub mod loop_cmd;
+pub mod model_file;
+pub mod record;
 pub mod reference;
 pub mod sim;
+pub mod simulate;
+pub mod synth;
 pub mod testing;
 pub mod track;
