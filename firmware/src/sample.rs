@@ -170,6 +170,12 @@ impl<const N: usize> LoopCore<N> {
     pub fn step(&mut self, links: &Links<'_>, raw: u32) -> Sample {
         if let Some(c) = links.config.take() {
             self.config = c;
+            if c.restart && self.state.mode() == Mode::ClosedLoop {
+                // Re-enter closed loop at the next step: generator from its start, pre-filter
+                // settled, compensator bumpless (model-core's entering logic).
+                self.state.set_mode(Mode::Hold);
+                self.state.set_mode(Mode::ClosedLoop);
+            }
         }
         let req = links.requests;
         if let Some(mode) = mode_from_u8(req.mode.swap(NO_MODE, Ordering::Relaxed)) {

@@ -6,16 +6,20 @@
 //! interrupt), and only if that succeeds posts the `LoopConfig` to the interrupt and keeps the
 //! candidate. A refused command leaves both the settings and the running loop untouched.
 //!
-//! What the controller in model-core offers today: the lag compensator (gain `kc`), the
-//! sample period, the output window, slew limit and safe value, and a reference level set
-//! each sample. The pre-filter (`tau`), the hysteresis feedforward (`ff`) and the periodic
-//! reference generators (sine, triangle) are not in `Controller` yet: the commands for them
-//! are parsed and validated but answered with an error saying so, and change nothing.
+//! A step reference is the controller's *external* reference (set every sample, passed
+//! through the pre-filter without preview, so a new level is approached smoothly). Sine and
+//! triangle use the controller's on-board *generator* with preview. When the generator, the
+//! pre-filter or the feedforward change while the loop is closed, [`LoopConfig::restart`]
+//! asks the interrupt to re-enter closed loop (generator from its start, pre-filter settled,
+//! compensator bumpless: `ControllerState::set_mode`); a new gain or step level needs no
+//! restart.
 
-use model_core::controller::{Controller, ControllerConfig};
+use model_core::controller::{Controller, ControllerConfig, ReferenceSource};
 use model_core::lag::LagConfig;
 use model_core::limits::ConfigError;
 use model_core::params;
+use model_core::prefilter::PreFilterConfig;
+use model_core::reference::{ReferenceConfig, Shape};
 
 use crate::command::ReferenceRequest;
 use crate::scaling::AdcCalibration;
@@ -25,6 +29,10 @@ use crate::scaling::AdcCalibration;
 pub struct Settings {
     /// Lag compensator gain.
     pub kc: f64,
+    /// Pre-filter time constant, seconds.
+    pub tau_s: f64,
+    /// Hysteresis feedforward in closed loop.
+    pub feedforward: bool,
     /// The reference.
     pub reference: ReferenceRequest,
     /// Loop rate, Hz (as obtained from the timer).
@@ -42,6 +50,9 @@ pub struct LoopConfig {
     pub reference_v: f32,
     /// ADC front-end correction.
     pub adc_cal: AdcCalibration,
+    /// Re-enter closed loop with this configuration (generator, pre-filter or feedforward
+    /// changed).
+    pub restart: bool,
 }
 
 /// Why settings cannot be applied.
@@ -49,15 +60,12 @@ pub struct LoopConfig {
 pub enum SettingsError {
     /// The controller refused the configuration.
     Config(ConfigError),
-    /// The feature is not in model-core's controller yet.
-    Unsupported(&'static str),
 }
 
 impl core::fmt::Display for SettingsError {
     fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
         match self {
             Self::Config(e) => write!(f, "{e}"),
-            Self::Unsupported(what) => write!(f, "{what} is not in model-core's controller yet"),
         }
     }
 }
@@ -67,6 +75,8 @@ impl Default for Settings {
     fn default() -> Self {
         Self {
             kc: params::LAG_KC,
+            tau_s: PreFilterConfig::default().tau_s,
+            feedforward: false,
             reference: ReferenceRequest::Step {
                 level_v: params::SAFE_OUTPUT_V,
             },
@@ -79,17 +89,59 @@ impl Default for Settings {
 impl Settings {
     /// The controller configuration of these settings.
     pub fn controller_config(&self) -> ControllerConfig {
+        let period_s = 1.0 / self.rate_hz;
+        let (source, reference) = match self.reference {
+            ReferenceRequest::Step { .. } => {
+                (ReferenceSource::External, ReferenceConfig::default())
+            }
+            ReferenceRequest::Sine {
+                offset_v,
+                amplitude_v,
+                freq_hz,
+            } => (
+                ReferenceSource::Generator,
+                ReferenceConfig {
+                    shape: Shape::Sine,
+                    offset_v,
+                    amplitude_v,
+                    freq_hz,
+                    period_s,
+                },
+            ),
+            ReferenceRequest::Triangle {
+                offset_v,
+                amplitude_v,
+                freq_hz,
+            } => (
+                ReferenceSource::Generator,
+                ReferenceConfig {
+                    shape: Shape::Triangle,
+                    offset_v,
+                    amplitude_v,
+                    freq_hz,
+                    period_s,
+                },
+            ),
+        };
+        let base = ControllerConfig::default();
         ControllerConfig {
             lag: LagConfig {
                 kc: self.kc,
-                period_s: 1.0 / self.rate_hz,
+                period_s,
                 ..LagConfig::default()
             },
-            ..ControllerConfig::default()
+            prefilter: PreFilterConfig {
+                tau_s: self.tau_s,
+                ..base.prefilter
+            },
+            reference,
+            source,
+            hysteresis_ff: self.feedforward,
+            ..base
         }
     }
 
-    /// Builds and checks what the interrupt will run.
+    /// Builds and checks what the interrupt will run (no restart).
     ///
     /// ```
     /// use firmware::settings::Settings;
@@ -103,14 +155,8 @@ impl Settings {
             ReferenceRequest::Step { .. } => {
                 return Err(SettingsError::Config(ConfigError::NotFinite));
             }
-            ReferenceRequest::Sine { .. } => {
-                return Err(SettingsError::Unsupported("the sine reference generator"));
-            }
-            ReferenceRequest::Triangle { .. } => {
-                return Err(SettingsError::Unsupported(
-                    "the triangle reference generator",
-                ));
-            }
+            ReferenceRequest::Sine { offset_v, .. }
+            | ReferenceRequest::Triangle { offset_v, .. } => offset_v as f32,
         };
         let controller =
             Controller::new(&self.controller_config()).map_err(SettingsError::Config)?;
@@ -118,7 +164,22 @@ impl Settings {
             controller,
             reference_v,
             adc_cal: self.adc_cal,
+            restart: false,
         })
+    }
+
+    /// What the interrupt runs after changing from `old` to `self`: restart when the
+    /// generator, the pre-filter, the feedforward or the rate changed.
+    pub fn transition_from(&self, old: &Settings) -> Result<LoopConfig, SettingsError> {
+        let mut cfg = self.loop_config()?;
+        let periodic = |r: &ReferenceRequest| !matches!(r, ReferenceRequest::Step { .. });
+        let reference_changed = (periodic(&self.reference) || periodic(&old.reference))
+            && self.reference != old.reference;
+        cfg.restart = reference_changed
+            || self.tau_s != old.tau_s
+            || self.feedforward != old.feedforward
+            || self.rate_hz != old.rate_hz;
+        Ok(cfg)
     }
 }
 
@@ -170,10 +231,51 @@ mod tests {
             },
             ..base
         };
+        let cfg = sine.loop_config().unwrap();
+        assert!(!cfg.restart);
+        let bad_tau = Settings {
+            tau_s: -1.0,
+            ..base
+        };
         assert!(matches!(
-            sine.loop_config(),
-            Err(SettingsError::Unsupported(_))
+            bad_tau.loop_config(),
+            Err(SettingsError::Config(_))
         ));
+        // Restart only when the generator, pre-filter, feedforward or rate change.
+        assert!(sine.transition_from(&base).unwrap().restart);
+        let level = Settings {
+            reference: ReferenceRequest::Step { level_v: 3.0 },
+            ..base
+        };
+        assert!(!level.transition_from(&base).unwrap().restart);
+        assert!(
+            !Settings { kc: 5000.0, ..base }
+                .transition_from(&base)
+                .unwrap()
+                .restart
+        );
+        assert!(
+            Settings {
+                feedforward: true,
+                ..base
+            }
+            .transition_from(&base)
+            .unwrap()
+            .restart
+        );
+        assert!(
+            Settings {
+                tau_s: 2e-4,
+                ..base
+            }
+            .transition_from(&base)
+            .unwrap()
+            .restart
+        );
+        println!(
+            "size of the configuration the interrupt takes: {} bytes",
+            core::mem::size_of::<LoopConfig>()
+        );
     }
 
     #[test]

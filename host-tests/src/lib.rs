@@ -6,8 +6,14 @@
 
 pub mod analysis;
 pub mod identify;
+pub mod identify_cmd;
 pub mod loop_cmd;
+pub mod model_file;
+pub mod record;
 pub mod record_cmd;
 pub mod reference;
 pub mod sim;
+pub mod simulate;
+pub mod synth;
 pub mod testing;
+pub mod track;

@@ -23,6 +23,10 @@
 //! * [`controller`]: the one per-sample function the firmware's interrupt and the QEMU runs
 //!   call: modes, faults, compensator, limits.
 //! * [`hysteresis`]: the static hysteretic map (Everett table) with its turning-point memory.
+//! * [`prefilter`]: the reference pre-filter `H'` (eq. 4.12), derived from the loop at run time.
+//! * [`reference`](mod@reference): reference generators (step, ramp, sine, triangle, square, sweep) with preview.
+//! * [`drift`], [`gain`], [`amplifier`], [`sensor`]: the non-linear blocks of ch. 5.
+//! * [`stage`]: the ch. 6 overall model composed of all blocks (the wiring is stated there).
 //! * [`frame`]: the capture wire format (firmware encoder, host decoder).
 //!
 //! Each block keeps its configuration (coefficients, `Copy`) apart from its state, so a new
@@ -31,15 +35,22 @@
 #![forbid(unsafe_code)]
 #![warn(missing_docs)]
 
+pub mod amplifier;
 pub mod codes;
 pub mod controller;
 pub mod discretize;
+pub mod drift;
 pub mod frame;
+pub mod gain;
 pub mod hysteresis;
 pub mod lag;
 pub mod limits;
 pub mod params;
 pub mod plant;
+pub mod prefilter;
+pub mod reference;
 pub mod sections;
+pub mod sensor;
+pub mod stage;
 
 pub use codes::{AdcCode, DacCode};

@@ -21,7 +21,7 @@ use super::board::{CPU_HZ, TIMER_CLOCK_HZ};
 use super::shared::*;
 use super::timer;
 use firmware::sample::Status;
-use firmware::settings::{Settings, SettingsError};
+use firmware::settings::Settings;
 use model_core::controller::{Faults, Mode};
 
 /// Fault bits and their names, for `faults` and `status`.
@@ -77,10 +77,12 @@ fn status(out: &mut Reply, settings: &Settings) {
     let u = DacCode::new(Status::load_i16(&STATUS.u)).volts();
     let _ = write!(
         out,
-        "ok mode={} y_v={y:.4} r_v={r:.4} u_v={u:.4} rate_hz={:.0} kc={} cal_gain={} cal_offset_v={} isr_max_us={:.2} isr_mean_us={:.2} overruns={} dac_late={} samples={} ",
+        "ok mode={} y_v={y:.4} r_v={r:.4} u_v={u:.4} rate_hz={:.0} kc={} tau_s={:e} ff={} cal_gain={} cal_offset_v={} isr_max_us={:.2} isr_mean_us={:.2} overruns={} dac_late={} samples={} ",
         mode_name(mode),
         settings.rate_hz,
         settings.kc,
+        settings.tau_s,
+        if settings.feedforward { "on" } else { "off" },
         settings.adc_cal.gain,
         settings.adc_cal.offset_v,
         scaling::cycles_to_us(st.max_cycles, CPU_HZ),
@@ -94,7 +96,7 @@ fn status(out: &mut Reply, settings: &Settings) {
 
 /// Builds, checks and posts a controller for `candidate`; on success it becomes the settings.
 fn commit(settings: &mut Settings, candidate: Settings, out: &mut Reply) -> bool {
-    match candidate.loop_config() {
+    match candidate.transition_from(settings) {
         Ok(cfg) => {
             CONFIG.post(cfg);
             *settings = candidate;
@@ -156,15 +158,22 @@ fn handle(
                 let _ = write!(out, "ok kc {kc}");
             }
         }
-        Command::Tau(_) => {
-            let _ = write!(out, "err {}", SettingsError::Unsupported("the pre-filter"));
+        Command::Tau(tau_s) => {
+            if commit(settings, Settings { tau_s, ..*settings }, out) {
+                let _ = write!(out, "ok tau_s {tau_s:e}");
+            }
         }
-        Command::Feedforward(_) => {
-            let _ = write!(
+        Command::Feedforward(on) => {
+            if commit(
+                settings,
+                Settings {
+                    feedforward: on,
+                    ..*settings
+                },
                 out,
-                "err {}",
-                SettingsError::Unsupported("the hysteresis feedforward")
-            );
+            ) {
+                let _ = write!(out, "ok ff {}", if on { "on" } else { "off" });
+            }
         }
         Command::Rate(rate_hz) => {
             if STATUS.mode() != Some(Mode::Safe) {

@@ -17,6 +17,14 @@ struct Cli {
 enum Command {
     /// Closed-loop figures of the thesis loop (margins, bandwidth, step response).
     Loop(host_tests::loop_cmd::LoopArgs),
+    /// Tracking error of a periodic reference with and without the pre-filter.
+    Track(host_tests::track::TrackArgs),
+    /// Open-loop response of a model to a recorded input (writes t,u,y).
+    Simulate(host_tests::simulate::SimulateArgs),
+    /// Measured-style records from a model, with noise.
+    Synth(host_tests::synth::SynthArgs),
+    /// Identify drift or hysteresis from a record and write a model file.
+    Identify(host_tests::identify_cmd::IdentifyArgs),
     /// Capture a run on the board over its serial port and write it as CSV (t,u,y,r,flags).
     Record(host_tests::record_cmd::RecordArgs),
 }
@@ -25,6 +33,10 @@ fn main() -> std::process::ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Loop(a) => host_tests::loop_cmd::run(&a),
+        Command::Track(a) => host_tests::track::run(&a),
+        Command::Simulate(a) => host_tests::simulate::run(&a),
+        Command::Synth(a) => host_tests::synth::run(&a),
+        Command::Identify(a) => host_tests::identify_cmd::run(&a),
         Command::Record(a) => host_tests::record_cmd::run(&a),
     };
     match result {
