@@ -72,7 +72,7 @@ impl AdcCalibration {
     /// ```
     /// use firmware::scaling::AdcCalibration;
     /// let c = AdcCalibration::from_front_end(100e3, 32.4e3, 48.7e3, 3.3).unwrap();
-    /// assert!((c.gain - 1.0129).abs() < 1e-4 && (c.offset_v + 0.0558).abs() < 1e-4);
+    /// assert!((c.gain - 1.0131).abs() < 1e-4 && (c.offset_v + 0.0545).abs() < 1e-4);
     /// ```
     pub fn from_front_end(
         r_in: f64,
