@@ -76,6 +76,10 @@ mod tests {
         let writer = std::thread::spawn(|| {
             for i in 1..=20_000u64 {
                 M.post([i; 32]);
+                // Leave the reader time to take some of the posts between writes.
+                for _ in 0..500 {
+                    std::hint::spin_loop();
+                }
             }
         });
         let mut seen = 0u32;
