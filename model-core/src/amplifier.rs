@@ -20,6 +20,7 @@
 //! fits `saturation` and `slew-rate-limit` as effects). A non-finite control input holds the
 //! previous output (documented safe behaviour; a real amplifier sees a DAC that has no NaN).
 
+use crate::limits::clamp_f32;
 use crate::limits::{ConfigError, check_period};
 use crate::params;
 
@@ -155,9 +156,11 @@ impl Amplifier {
     #[inline]
     pub fn static_output(&self, u_v: f32) -> f32 {
         if self.saturation {
-            (u_v.max(self.in_lo).min(self.in_hi) * self.gain)
-                .max(self.out_lo)
-                .min(self.out_hi)
+            clamp_f32(
+                clamp_f32(u_v, self.in_lo, self.in_hi) * self.gain,
+                self.out_lo,
+                self.out_hi,
+            )
         } else {
             u_v * self.gain
         }
@@ -178,9 +181,11 @@ impl Amplifier {
             return s.output_v;
         }
         let target = self.static_output(u_v);
-        let d = (target - s.output_v)
-            .max(-self.slew_v_per_step)
-            .min(self.slew_v_per_step);
+        let d = clamp_f32(
+            target - s.output_v,
+            -self.slew_v_per_step,
+            self.slew_v_per_step,
+        );
         let v = s.output_v + d;
         // Without saturation a huge finite input may overflow to infinity: hold instead.
         if v.is_finite() {

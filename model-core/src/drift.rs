@@ -37,6 +37,7 @@
 //! `1 - a` wrong by several per cent and lose the increments of every step. Cost per step: the
 //! cubic, three multiply-adds and three compensated sums.
 
+use crate::limits::clamp_f32;
 use crate::limits::{ConfigError, check_period};
 use crate::params;
 use crate::sections::{Accumulator, FirstOrderLag};
@@ -191,7 +192,7 @@ impl Drift {
     #[inline]
     pub fn weight(&self, u_v: f32) -> f32 {
         // max/min instead of clamp: no panic path in the per-sample code.
-        let x = u_v.max(self.lo_v).min(self.hi_v);
+        let x = clamp_f32(u_v, self.lo_v, self.hi_v);
         let c = self.poly;
         (c[0] + x * (c[1] + x * (c[2] + x * c[3]))) * u_v
     }

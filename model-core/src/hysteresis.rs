@@ -88,6 +88,7 @@
 //! * **Changing the table under a memory**: the stored outputs belong to the table that made
 //!   them; call [`HysteresisMemory::reset`] after swapping tables.
 
+use crate::limits::clamp_f32;
 use crate::limits::{ConfigError, Flags};
 use crate::params;
 
@@ -349,8 +350,8 @@ impl HysteresisTable {
     #[inline]
     pub fn everett_v(&self, alpha_v: f32, beta_v: f32) -> f32 {
         let top = (GRID_NODES - 1) as f32;
-        let x = ((alpha_v - self.u_min_v) * self.inv_step_per_v).clamp(0.0, top);
-        let y = ((beta_v - self.u_min_v) * self.inv_step_per_v).clamp(0.0, x);
+        let x = clamp_f32((alpha_v - self.u_min_v) * self.inv_step_per_v, 0.0, top);
+        let y = clamp_f32((beta_v - self.u_min_v) * self.inv_step_per_v, 0.0, x);
         // Non-negative and below GRID_NODES - 1: the casts truncate towards zero (floor).
         let i = (x as usize).min(GRID_NODES - 2);
         let j = (y as usize).min(GRID_NODES - 2);
@@ -461,7 +462,7 @@ impl HysteresisTable {
         if u < self.u_min_v || u > self.u_max_v {
             *flags |= Flags::CLAMPED;
         }
-        Some(u.clamp(self.u_min_v, self.u_max_v))
+        Some(clamp_f32(u, self.u_min_v, self.u_max_v))
     }
 
     fn commit(&self, mem: &mut HysteresisMemory, u: f32, step: Step) {
@@ -636,8 +637,8 @@ impl HysteresisTable {
         }
         // Grid nodes strictly inside (lo, hi): indices first..=last.
         let top = (GRID_NODES - 1) as f32;
-        let x_lo = ((lo - self.u_min_v) * self.inv_step_per_v).clamp(0.0, top);
-        let x_hi = ((hi - self.u_min_v) * self.inv_step_per_v).clamp(0.0, top);
+        let x_lo = clamp_f32((lo - self.u_min_v) * self.inv_step_per_v, 0.0, top);
+        let x_hi = clamp_f32((hi - self.u_min_v) * self.inv_step_per_v, 0.0, top);
         let mut first = x_lo as usize + 1;
         let mut last = (x_hi as usize).min(GRID_NODES - 1);
         if self.node_v(last) >= hi {
@@ -666,7 +667,7 @@ impl HysteresisTable {
             }
         }
         if yb > ya {
-            (xa + (xb - xa) * ((w - ya) / (yb - ya))).clamp(xa, xb)
+            clamp_f32(xa + (xb - xa) * ((w - ya) / (yb - ya)), xa, xb)
         } else {
             xb
         }
@@ -774,7 +775,7 @@ impl HysteresisMemory {
     pub fn reset(&mut self, table: &HysteresisTable, input_v: f32) {
         let (lo, hi) = table.input_range_v();
         let u = if input_v.is_finite() {
-            input_v.clamp(lo, hi)
+            clamp_f32(input_v, lo, hi)
         } else {
             lo
         };

@@ -68,6 +68,7 @@ use crate::discretize::zoh_delayed;
 use crate::drift::{Drift, DriftConfig, DriftState};
 use crate::gain::{FastGain, FastGainConfig};
 use crate::hysteresis::{HysteresisMemory, HysteresisTable};
+use crate::limits::clamp_f32;
 use crate::limits::{ConfigError, check_period};
 use crate::params;
 use crate::plant::{
@@ -600,7 +601,7 @@ impl Feedforward {
             let k = st.scale(s.last_v, 1.0);
             let u = t.inverse(&mut s.hysteresis, want / k);
             // The table clamps to its own range; the window may be narrower.
-            u.max(a).min(b)
+            clamp_f32(u, a, b)
         } else if !want.is_finite() || st.fast_memoryless(a) >= want {
             a
         } else if st.fast_memoryless(b) <= want {
