@@ -6,6 +6,8 @@
 
 pub mod analysis;
 pub mod loop_cmd;
+pub mod qemu;
+pub mod qemu_vectors;
 pub mod reference;
 pub mod sim;
 pub mod testing;

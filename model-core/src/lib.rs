@@ -38,6 +38,7 @@ pub mod lag;
 pub mod limits;
 pub mod params;
 pub mod plant;
+pub mod scenarios;
 pub mod sections;
 
 pub use codes::{AdcCode, DacCode};

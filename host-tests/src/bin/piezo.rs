@@ -17,12 +17,15 @@ struct Cli {
 enum Command {
     /// Closed-loop figures of the thesis loop (margins, bandwidth, step response).
     Loop(host_tests::loop_cmd::LoopArgs),
+    /// The control code on Cortex-M4F/M7 under QEMU: scenarios, on-target tests, budget.
+    Qemu(host_tests::qemu::QemuArgs),
 }
 
 fn main() -> std::process::ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Loop(a) => host_tests::loop_cmd::run(&a),
+        Command::Qemu(a) => host_tests::qemu::run(&a),
     };
     match result {
         Ok(()) => std::process::ExitCode::SUCCESS,

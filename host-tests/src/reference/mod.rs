@@ -2,5 +2,5 @@
 //! written from the continuous equations again, in another form, so that an error in one is
 //! not repeated in the other.
 
-pub mod lag;
 pub mod hysteresis_truth;
+pub mod lag;

@@ -1,0 +1,191 @@
+//! The instruction budget: instructions per call of the whole control step and of each block,
+//! counted on QEMU with `-icount shift=0` by SysTick (1 tick = 40 instructions; see the lib).
+//!
+//! Method: a closed loop (thesis controller on the linear plant, 100 Hz triangle reference,
+//! sensor through the ADC codes) is run for a warm-up, then [`N`] samples of every block's
+//! inputs are recorded. Each block is then timed over the recorded inputs in a loop of `N`
+//! calls, starting from the state it had at the start of the recording, so it takes the same
+//! branches as in the loop. An empty loop over the same inputs (the `overhead` line) is
+//! subtracted by the host. `black_box` keeps inputs and outputs from being folded away.
+//!
+//! Output: `CPU <part>`, `CAL <ticks> <nops>` (a block of known length, to check the tick
+//! size), `BENCH <name> <ticks> <calls>` per block, `DONE 0`.
+#![cfg_attr(target_os = "none", no_std, no_main)]
+
+#[cfg(target_os = "none")]
+mod image {
+    use core::hint::black_box;
+    use model_core::codes::{AdcCode, DacCode};
+    use model_core::controller::{ControllerState, Mode};
+    use model_core::hysteresis::{HysteresisMemory, HysteresisTable};
+    use model_core::scenarios::{LinearStage, Scenario, StageModel, thesis_controller};
+    use piezo_qemu::{EXIT_FAIL, EXIT_PASS, InstructionCounter, cpu_part, exit};
+
+    /// Calls per timed loop.
+    const N: usize = 1000;
+    /// Samples run before recording.
+    const WARM_UP: u32 = 2000;
+    /// Length of the calibration block, instructions.
+    const CAL_NOPS: u32 = 4000;
+
+    struct Recording {
+        adc: [AdcCode; N],
+        error_v: [f32; N],
+        raw_v: [f32; N],
+        last_v: [f32; N],
+        command_v: [f32; N],
+        measured_v: [f32; N],
+    }
+
+    fn report(name: &str, ticks: u32) {
+        defmt::println!("BENCH {=str} {=u32} {=u32}", name, ticks, N as u32);
+    }
+
+    #[inline(always)]
+    fn time(counter: &InstructionCounter, mut f: impl FnMut(usize)) -> u32 {
+        let t0 = counter.now();
+        for i in 0..N {
+            f(i);
+        }
+        let t1 = counter.now();
+        InstructionCounter::elapsed(t0, t1)
+    }
+
+    #[cortex_m_rt::entry]
+    fn main() -> ! {
+        defmt::println!("CPU {=u32}", cpu_part());
+        let Some(p) = cortex_m::Peripherals::take() else {
+            exit(EXIT_FAIL)
+        };
+        let counter = InstructionCounter::new(p.SYST);
+
+        let t0 = counter.now();
+        // SAFETY: nothing but no-operations.
+        unsafe { core::arch::asm!(".rept 4000", "nop", ".endr", options(nomem, nostack)) };
+        let t1 = counter.now();
+        defmt::println!(
+            "CAL {=u32} {=u32}",
+            InstructionCounter::elapsed(t0, t1),
+            CAL_NOPS
+        );
+
+        let (Ok(controller), Ok(mut stage)) = (thesis_controller(), LinearStage::thesis()) else {
+            exit(EXIT_FAIL)
+        };
+        let mut st = ControllerState::new(&controller);
+        st.set_mode(Mode::ClosedLoop);
+        for n in 0..WARM_UP {
+            st.set_reference(Scenario::Triangle.reference_v(n));
+            let s = controller.step(&mut st, AdcCode::from_volts(stage.output_v()));
+            stage.step(s.dac.volts());
+        }
+        let st0 = st;
+        let stage0 = stage;
+        // The compensator's own state is private to the controller: shadow it with a
+        // compensator driven by the same errors from the same command.
+        let mut lag_state = model_core::lag::LagState::new(st.command_v());
+        let lag_state0 = lag_state;
+        let mut rec = Recording {
+            adc: [AdcCode(0); N],
+            error_v: [0.0; N],
+            raw_v: [0.0; N],
+            last_v: [0.0; N],
+            command_v: [0.0; N],
+            measured_v: [0.0; N],
+        };
+        for i in 0..N {
+            let n = WARM_UP + i as u32;
+            let r = Scenario::Triangle.reference_v(n);
+            st.set_reference(r);
+            let adc = AdcCode::from_volts(stage.output_v());
+            let last = st.command_v();
+            let s = controller.step(&mut st, adc);
+            controller.lag.update(&mut lag_state, r - s.measured_v);
+            stage.step(s.dac.volts());
+            rec.adc[i] = adc;
+            rec.error_v[i] = r - s.measured_v;
+            rec.last_v[i] = last;
+            // The limits see the compensator's raw output; the command is a fair stand-in
+            // with the same branches (inside the window, within the slew limit).
+            rec.raw_v[i] = s.command_v;
+            rec.command_v[i] = s.dac.volts();
+            rec.measured_v[i] = s.measured_v;
+        }
+
+        let overhead = time(&counter, |i| {
+            black_box(black_box(rec.adc[i]));
+        });
+        report("overhead", overhead);
+
+        let mut s = st0;
+        let ticks = time(&counter, |i| {
+            black_box(controller.step(&mut s, black_box(rec.adc[i])));
+        });
+        report("controller_step", ticks);
+
+        let mut s = st0;
+        s.raise(model_core::controller::Faults::WATCHDOG);
+        let ticks = time(&counter, |i| {
+            black_box(controller.step(&mut s, black_box(rec.adc[i])));
+        });
+        report("controller_step_faulted", ticks);
+
+        let mut ls = lag_state0;
+        let ticks = time(&counter, |i| {
+            black_box(
+                controller
+                    .lag
+                    .update_flags(&mut ls, black_box(rec.error_v[i])),
+            );
+        });
+        report("lag_update", ticks);
+
+        let limits = controller.lag.limits;
+        let ticks = time(&counter, |i| {
+            black_box(limits.apply(black_box(rec.last_v[i]), black_box(rec.raw_v[i])));
+        });
+        report("limits_apply", ticks);
+
+        let ticks = time(&counter, |i| {
+            black_box(black_box(rec.adc[i]).volts());
+        });
+        report("adc_to_volts", ticks);
+
+        let ticks = time(&counter, |i| {
+            black_box(DacCode::from_volts(black_box(rec.command_v[i])));
+        });
+        report("dac_from_volts", ticks);
+
+        let mut stage = stage0;
+        let ticks = time(&counter, |i| {
+            stage.step(black_box(rec.command_v[i]));
+            black_box(stage.output_v());
+        });
+        report("plant_step", ticks);
+
+        let table = HysteresisTable::thesis_default();
+        let mut mem = HysteresisMemory::new();
+        for i in 0..N {
+            table.forward(&mut mem, rec.command_v[i]);
+        }
+        let mem0 = mem.clone();
+        let ticks = time(&counter, |i| {
+            black_box(table.forward(&mut mem, black_box(rec.command_v[i])));
+        });
+        report("hysteresis_forward", ticks);
+
+        let mut mem = mem0;
+        let ticks = time(&counter, |i| {
+            black_box(table.inverse(&mut mem, black_box(rec.measured_v[i])));
+        });
+        report("hysteresis_inverse", ticks);
+
+        defmt::println!("DONE 0");
+        exit(EXIT_PASS)
+    }
+}
+
+#[cfg(not(target_os = "none"))]
+fn main() {
+    eprintln!("this image runs on QEMU: cargo run -p host-tests --bin piezo -- qemu bench");
+}
