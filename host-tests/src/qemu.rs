@@ -170,9 +170,21 @@ pub fn run(args: &QemuArgs) -> Result<()> {
             Ok(())
         }
         QemuCommand::Bench(m) => {
-            for &machine in m.machine.machines() {
-                let b = bench_on(machine)?;
-                print!("{}", b.table());
+            let benches = m
+                .machine
+                .machines()
+                .iter()
+                .map(|&machine| bench_on(machine))
+                .collect::<Result<Vec<_>>>()?;
+            print!("{}", bench_table(&benches));
+            for b in &benches {
+                let step = b.get("controller_step").unwrap_or(f64::NAN);
+                if step.is_nan() || step > STEP_BUDGET_DEFECT {
+                    bail!(
+                        "{}: the control step takes {step:.1} instructions, more than {STEP_BUDGET_DEFECT}",
+                        b.machine.machine
+                    );
+                }
             }
             Ok(())
         }
@@ -688,6 +700,62 @@ impl Bench {
         }
         s
     }
+}
+
+/// What each bench row measures.
+pub fn bench_description(name: &str) -> &'static str {
+    match name {
+        "controller_step" => {
+            "`Controller::step`, closed loop: ADC code to DAC code (the ISR's maths)"
+        }
+        "controller_step_faulted" => "`Controller::step` with a latched fault (safe ramp)",
+        "lag_update" => "`LagCompensator::update_flags` (with its limits)",
+        "limits_apply" => "`OutputLimits::apply` (NaN guard, slew, window)",
+        "adc_to_volts" => "`AdcCode::volts`",
+        "dac_from_volts" => "`DacCode::from_volts`",
+        "plant_step" => "`LinearPlant::step` (simulation only, not in the ISR)",
+        "hysteresis_forward" => "`HysteresisTable::forward`",
+        "hysteresis_inverse" => "`HysteresisTable::inverse` (feedforward)",
+        _ => "",
+    }
+}
+
+/// The instruction table of one or more machines, side by side.
+pub fn bench_table(benches: &[Bench]) -> String {
+    let mut s = String::from(
+        "Instructions per call on thumbv7em-none-eabihf (QEMU -icount shift=0, SysTick over 1000 calls, empty loop subtracted)\n",
+    );
+    s += "| block |";
+    for b in benches {
+        s += &format!(" {} ({}) |", b.machine.machine, b.machine.cpu);
+    }
+    s += " what |\n|---|";
+    for _ in benches {
+        s += "---|";
+    }
+    s += "---|\n";
+    let Some(first) = benches.first() else {
+        return s;
+    };
+    for r in &first.rows {
+        s += &format!("| {} |", r.name);
+        for b in benches {
+            s += &format!(" {:.1} |", b.get(&r.name).unwrap_or(f64::NAN));
+        }
+        s += &format!(" {} |\n", bench_description(&r.name));
+    }
+    let step = first.get("controller_step").unwrap_or(f64::NAN);
+    s += &format!(
+        "Whole step: {step:.1} instructions (goal <= {STEP_BUDGET_GOAL}, defect > {STEP_BUDGET_DEFECT}){}\n",
+        if step <= STEP_BUDGET_GOAL {
+            ": within the goal"
+        } else if step <= STEP_BUDGET_DEFECT {
+            ": OVER THE GOAL"
+        } else {
+            ": DEFECT"
+        }
+    );
+    s
 }
 
 /// Build and run the bench image on `machine`.

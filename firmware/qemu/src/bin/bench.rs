@@ -8,6 +8,11 @@
 //! branches as in the loop. An empty loop over the same inputs (the `overhead` line) is
 //! subtracted by the host. `black_box` keeps inputs and outputs from being folded away.
 //!
+//! Every block is called through an `#[inline(never)]` wrapper, as the interrupt calls the
+//! step: coefficients and state are loaded from memory on every call instead of staying in
+//! registers across the timing loop, and the call and return are counted (a few
+//! instructions), so the figures are what one interrupt pays, not a loop's best case.
+//!
 //! Output: `CPU <part>`, `CAL <ticks> <nops>` (a block of known length, to check the tick
 //! size), `BENCH <name> <ticks> <calls>` per block, `DONE 0`.
 #![cfg_attr(target_os = "none", no_std, no_main)]
@@ -16,8 +21,11 @@
 mod image {
     use core::hint::black_box;
     use model_core::codes::{AdcCode, DacCode};
-    use model_core::controller::{ControllerState, Mode};
+    use model_core::controller::{Controller, ControllerState, Mode, Sample};
     use model_core::hysteresis::{HysteresisMemory, HysteresisTable};
+    use model_core::lag::{LagCompensator, LagState};
+    use model_core::limits::{Flags, OutputLimits};
+    use model_core::plant::{LinearPlant, PlantState};
     use model_core::scenarios::{LinearStage, Scenario, StageModel, thesis_controller};
     use piezo_qemu::{EXIT_FAIL, EXIT_PASS, InstructionCounter, cpu_part, exit};
 
@@ -35,6 +43,46 @@ mod image {
         last_v: [f32; N],
         command_v: [f32; N],
         measured_v: [f32; N],
+    }
+
+    #[inline(never)]
+    fn controller_step(c: &Controller, s: &mut ControllerState, adc: AdcCode) -> Sample {
+        c.step(s, adc)
+    }
+
+    #[inline(never)]
+    fn lag_update(c: &LagCompensator, s: &mut LagState, e: f32) -> (f32, Flags) {
+        c.update_flags(s, e)
+    }
+
+    #[inline(never)]
+    fn limits_apply(l: &OutputLimits, last: f32, raw: f32) -> (f32, Flags) {
+        l.apply(last, raw)
+    }
+
+    #[inline(never)]
+    fn adc_to_volts(a: AdcCode) -> f32 {
+        a.volts()
+    }
+
+    #[inline(never)]
+    fn dac_from_volts(v: f32) -> DacCode {
+        DacCode::from_volts(v)
+    }
+
+    #[inline(never)]
+    fn plant_step(p: &LinearPlant, s: &mut PlantState, u: f32) -> f32 {
+        p.step(s, u)
+    }
+
+    #[inline(never)]
+    fn hysteresis_forward(t: &HysteresisTable, m: &mut HysteresisMemory, u: f32) -> f32 {
+        t.forward(m, u)
+    }
+
+    #[inline(never)]
+    fn hysteresis_inverse(t: &HysteresisTable, m: &mut HysteresisMemory, y: f32) -> f32 {
+        t.inverse(m, y)
     }
 
     fn report(name: &str, ticks: u32) {
@@ -83,7 +131,7 @@ mod image {
         let stage0 = stage;
         // The compensator's own state is private to the controller: shadow it with a
         // compensator driven by the same errors from the same command.
-        let mut lag_state = model_core::lag::LagState::new(st.command_v());
+        let mut lag_state = LagState::new(st.command_v());
         let lag_state0 = lag_state;
         let mut rec = Recording {
             adc: [AdcCode(0); N],
@@ -119,47 +167,54 @@ mod image {
 
         let mut s = st0;
         let ticks = time(&counter, |i| {
-            black_box(controller.step(&mut s, black_box(rec.adc[i])));
+            black_box(controller_step(&controller, &mut s, black_box(rec.adc[i])));
         });
         report("controller_step", ticks);
 
         let mut s = st0;
         s.raise(model_core::controller::Faults::WATCHDOG);
         let ticks = time(&counter, |i| {
-            black_box(controller.step(&mut s, black_box(rec.adc[i])));
+            black_box(controller_step(&controller, &mut s, black_box(rec.adc[i])));
         });
         report("controller_step_faulted", ticks);
 
         let mut ls = lag_state0;
         let ticks = time(&counter, |i| {
-            black_box(
-                controller
-                    .lag
-                    .update_flags(&mut ls, black_box(rec.error_v[i])),
-            );
+            black_box(lag_update(
+                &controller.lag,
+                &mut ls,
+                black_box(rec.error_v[i]),
+            ));
         });
         report("lag_update", ticks);
 
         let limits = controller.lag.limits;
         let ticks = time(&counter, |i| {
-            black_box(limits.apply(black_box(rec.last_v[i]), black_box(rec.raw_v[i])));
+            black_box(limits_apply(
+                &limits,
+                black_box(rec.last_v[i]),
+                black_box(rec.raw_v[i]),
+            ));
         });
         report("limits_apply", ticks);
 
         let ticks = time(&counter, |i| {
-            black_box(black_box(rec.adc[i]).volts());
+            black_box(adc_to_volts(black_box(rec.adc[i])));
         });
         report("adc_to_volts", ticks);
 
         let ticks = time(&counter, |i| {
-            black_box(DacCode::from_volts(black_box(rec.command_v[i])));
+            black_box(dac_from_volts(black_box(rec.command_v[i])));
         });
         report("dac_from_volts", ticks);
 
         let mut stage = stage0;
         let ticks = time(&counter, |i| {
-            stage.step(black_box(rec.command_v[i]));
-            black_box(stage.output_v());
+            black_box(plant_step(
+                &stage.plant,
+                &mut stage.state,
+                black_box(rec.command_v[i]),
+            ));
         });
         report("plant_step", ticks);
 
@@ -170,13 +225,21 @@ mod image {
         }
         let mem0 = mem.clone();
         let ticks = time(&counter, |i| {
-            black_box(table.forward(&mut mem, black_box(rec.command_v[i])));
+            black_box(hysteresis_forward(
+                &table,
+                &mut mem,
+                black_box(rec.command_v[i]),
+            ));
         });
         report("hysteresis_forward", ticks);
 
         let mut mem = mem0;
         let ticks = time(&counter, |i| {
-            black_box(table.inverse(&mut mem, black_box(rec.measured_v[i])));
+            black_box(hysteresis_inverse(
+                &table,
+                &mut mem,
+                black_box(rec.measured_v[i]),
+            ));
         });
         report("hysteresis_inverse", ticks);
 
