@@ -15,9 +15,7 @@ mod board {
 
     #[panic_handler]
     fn panic(_: &core::panic::PanicInfo) -> ! {
-        loop {
-            cortex_m::asm::udf();
-        }
+        cortex_m::asm::udf()
     }
 }
 
