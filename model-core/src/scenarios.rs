@@ -154,8 +154,13 @@ fn triangle_reference(n: u32) -> f32 {
 /// What the loop drives: input volts at the amplifier's control input, output sensor monitor
 /// volts.
 pub trait StageModel {
-    /// The output at the present sample.
+    /// The true output at the present sample, sensor volts without noise: what the error
+    /// figures are measured on.
     fn output_v(&self) -> f32;
+    /// What the sensor reads at the present sample, volts, before the ADC. `noise` is a
+    /// uniform sample in `[-1, 1)` from the scenario's seeded generator, for models without a
+    /// sensor of their own.
+    fn measured_v(&self, noise: f32) -> f32;
     /// Hold `u_v` for one period and advance.
     fn step(&mut self, u_v: f32);
 }
@@ -183,6 +188,11 @@ impl StageModel for LinearStage {
     #[inline]
     fn output_v(&self) -> f32 {
         self.plant.output(&self.state)
+    }
+    /// The output plus uniform noise of +-[`params::SENSOR_NOISE_V`].
+    #[inline]
+    fn measured_v(&self, noise: f32) -> f32 {
+        self.output_v() + params::SENSOR_NOISE_V as f32 * noise
     }
     #[inline]
     fn step(&mut self, u_v: f32) {
@@ -391,7 +401,6 @@ pub fn run_with<S: StageModel>(
     let limits = ctrl.lag.limits;
     let slew_tol = limits.slew_v_per_step * (1.0 + 1e-5) + 1e-6;
     let mut noise = Noise(params::SCENARIO_NOISE_SEED);
-    let noise_v = params::SENSOR_NOISE_V as f32;
     let mut f = Figures {
         fault_latched_at: NEVER,
         safe_reached_at: NEVER,
@@ -405,7 +414,7 @@ pub fn run_with<S: StageModel>(
     for n in 0..SAMPLES {
         let r = scenario.reference_v(n);
         let y = stage.output_v();
-        let mut adc = AdcCode::from_volts(y + noise_v * noise.next());
+        let mut adc = AdcCode::from_volts(stage.measured_v(noise.next()));
         match scenario {
             Scenario::SensorSaturates if n >= FAULT_AT => adc = AdcCode::MAX,
             Scenario::SensorSticks if n == FAULT_AT => stuck_code = adc,
