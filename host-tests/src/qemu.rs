@@ -165,6 +165,9 @@ pub fn run(args: &QemuArgs) -> Result<()> {
         QemuCommand::Test(m) => {
             for &machine in m.machine.machines() {
                 let out = on_target_tests(machine)?;
+                for l in &out.output.lines {
+                    println!("{}: {l}", machine.machine);
+                }
                 println!("{}: {} on-target tests passed", machine.machine, out.passed);
             }
             Ok(())

@@ -14,10 +14,18 @@
 //! * **Converter codes**: round-half-away-from-zero and saturate, in `f64`, on seeded random
 //!   volts; values within 1e-3 LSB of a half code are skipped for the same reason.
 //!
+//! * **Hysteresis table**: the Preisach sum over the wiped-out turning-point stack, in `f64`
+//!   ([`hysteresis_reference`]): `y = offset + sum of +E(s_k, s_k-1)` over rising segments and
+//!   `-E(s_k-1, s_k)` over falling ones, with `E` interpolated in `f64` from the grid of
+//!   `HysteresisTable::thesis_default()` (the table's data, not its arithmetic: model-core keeps
+//!   the output at each turning point and adds one Everett difference per step, in `f32`).
+//!   Input: nested reversals inside the range (0.5..9.5 V), then a rise that wipes them out.
+//!
 //! Values go in as IEEE bits (`u32`) so the target reads exactly what the host wrote.
 
 use crate::reference::lag::RefLag;
 use anyhow::{Context, Result};
+use model_core::hysteresis::{GRID_NODES, HysteresisTable};
 use model_core::params;
 use rand::{Rng, SeedableRng, rngs::StdRng};
 use std::fmt::Write as _;
@@ -31,6 +39,11 @@ pub const LIMIT_CASES: usize = 64;
 pub const CODE_CASES: usize = 64;
 /// Seed of the random cases.
 pub const SEED: u64 = 0x5eed_0006;
+
+/// Turning points of the hysteresis vector's input, volts at the amplifier input.
+pub const HYST_TURNS_V: [f64; 12] = [0.5, 9.0, 2.0, 8.0, 3.0, 7.0, 4.0, 6.0, 4.5, 5.5, 9.2, 1.0];
+/// Input step between samples of the hysteresis vector, volts.
+pub const HYST_STEP_V: f64 = 0.1;
 
 /// Where the generated file lives.
 pub fn vectors_path() -> PathBuf {
@@ -130,6 +143,91 @@ fn near_half_code(volts: f64) -> bool {
     })
 }
 
+/// The hysteresis vector's input: straight lines of [`HYST_STEP_V`] steps through
+/// [`HYST_TURNS_V`], from the bottom of the range.
+pub fn hysteresis_input() -> Vec<f32> {
+    let mut u = Vec::new();
+    let mut at = params::HYST_DEFAULT_INPUT_MIN_V;
+    for &target in &HYST_TURNS_V {
+        let n = ((target - at).abs() / HYST_STEP_V).ceil() as usize;
+        for k in 1..=n {
+            u.push((at + (target - at) * k as f64 / n as f64) as f32);
+        }
+        at = target;
+    }
+    u
+}
+
+/// The Everett function of `table`'s grid at `(alpha, beta)`, bilinear in `f64`, with the
+/// antisymmetric extension in the diagonal cells (as the table defines it).
+pub fn everett_reference(table: &HysteresisTable, alpha: f64, beta: f64) -> f64 {
+    let (lo, hi) = table.input_range_v();
+    let (lo, hi) = (lo as f64, hi as f64);
+    let top = (GRID_NODES - 1) as f64;
+    let step = (hi - lo) / top;
+    let x = ((alpha - lo) / step).clamp(0.0, top);
+    let y = ((beta - lo) / step).clamp(0.0, x);
+    let i = (x.floor() as usize).min(GRID_NODES - 2);
+    let j = (y.floor() as usize).min(GRID_NODES - 2);
+    let (fx, fy) = (x - i as f64, y - j as f64);
+    let e = |a: usize, b: usize| table.node(a, b) as f64;
+    if i == j {
+        return e(i + 1, i) * (fx - fy);
+    }
+    let a = e(i, j) + (e(i + 1, j) - e(i, j)) * fx;
+    let b = e(i, j + 1) + (e(i + 1, j + 1) - e(i, j + 1)) * fx;
+    a + (b - a) * fy
+}
+
+/// The Preisach output for the input sequence `u`, from the bottom of the range, in `f64`:
+/// a stack of alternating turning points with wiping-out, summed afresh at every sample.
+pub fn hysteresis_reference(table: &HysteresisTable, u: &[f32]) -> Vec<f64> {
+    let (lo, _) = table.input_range_v();
+    let mut stack: Vec<f64> = vec![lo as f64];
+    let mut c = lo as f64;
+    let offset = table.offset_v() as f64;
+    let seg = |a: f64, b: f64| {
+        if b >= a {
+            everett_reference(table, b, a)
+        } else {
+            -everett_reference(table, a, b)
+        }
+    };
+    u.iter()
+        .map(|&x| {
+            let x = x as f64;
+            let rising = (stack.len() - 1).is_multiple_of(2);
+            if x != c && (x > c) != rising && c != *stack.last().unwrap_or(&c) {
+                stack.push(c);
+            }
+            loop {
+                let n = stack.len() - 1;
+                if n == 0 {
+                    break;
+                }
+                let rising = n.is_multiple_of(2);
+                let prev = stack[n - 1];
+                let passes = if rising { x >= prev } else { x <= prev };
+                if !passes {
+                    break;
+                }
+                if n >= 2 {
+                    stack.truncate(n - 1);
+                } else {
+                    stack.truncate(1);
+                    break;
+                }
+            }
+            c = x;
+            let mut y = offset;
+            for w in stack.windows(2) {
+                y += seg(w[0], w[1]);
+            }
+            y + seg(*stack.last().unwrap_or(&x), x)
+        })
+        .collect()
+}
+
 fn bits_list(out: &mut String, name: &str, doc: &str, v: impl Iterator<Item = f32>) {
     let v: Vec<String> = v.map(|x| format!("0x{:08x}", x.to_bits())).collect();
     let _ = writeln!(out, "/// {doc}");
@@ -169,6 +267,22 @@ pub fn generate() -> String {
         "LAG_COMMAND_V",
         "f64 reference command (RefLag), rounded to f32, volts.",
         reference.iter().map(|&u| u as f32),
+    );
+
+    let table = HysteresisTable::thesis_default();
+    let hu = hysteresis_input();
+    let hy = hysteresis_reference(&table, &hu);
+    bits_list(
+        &mut s,
+        "HYST_INPUT_V",
+        "Hysteresis input, volts at the amplifier input (from the bottom of the range).",
+        hu.iter().copied(),
+    );
+    bits_list(
+        &mut s,
+        "HYST_OUTPUT_V",
+        "f64 Preisach sum over the turning-point stack (thesis_default grid), sensor volts.",
+        hy.iter().map(|&y| y as f32),
     );
 
     let mut rng = StdRng::seed_from_u64(SEED);

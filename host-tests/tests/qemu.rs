@@ -24,6 +24,9 @@ fn on_target_tests_pass_on_qemu() {
     }
     for machine in MACHINES {
         let run = qemu::on_target_tests(machine).unwrap_or_else(|e| panic!("{e:#}"));
+        for l in &run.output.lines {
+            println!("{}: {l}", machine.machine);
+        }
         println!(
             "{}: {} on-target tests passed in {:.2} s",
             machine.machine,

@@ -49,3 +49,28 @@ fn code_reference_rounds_and_saturates() {
     assert_eq!(v::code_reference(-0.5 * lsb, 14), -1);
     assert_eq!(v::code_reference(0.49 * lsb, 14), 0);
 }
+
+#[test]
+fn hysteresis_reference_agrees_with_model_core_on_the_host() {
+    use model_core::hysteresis::{HysteresisMemory, HysteresisTable};
+    let t = HysteresisTable::thesis_default();
+    let u = v::hysteresis_input();
+    let want = v::hysteresis_reference(&t, &u);
+    let mut m = HysteresisMemory::new();
+    let mut worst: f64 = 0.0;
+    for (x, w) in u.iter().zip(&want) {
+        let y = t.forward(&mut m, *x) as f64;
+        worst = worst.max((y - w).abs());
+    }
+    let (lo, hi) = want
+        .iter()
+        .fold((f64::MAX, f64::MIN), |(a, b), y| (a.min(*y), b.max(*y)));
+    println!(
+        "hysteresis: {} samples, output {lo:.3}..{hi:.3} V, worst |f32 model - f64 Preisach sum| = {worst:.3e} V",
+        u.len()
+    );
+    // A third of an ADC step (0.1 mV): f32 rounding of a few Everett differences of up to 8 V.
+    assert!(worst < 1e-4, "{worst}");
+    // The reference is not trivially the input: the loop is open.
+    assert!(hi - lo > 5.0);
+}

@@ -197,6 +197,30 @@ mod tests {
         defmt::println!("controller: sensor rail latched, 4 absurd gains refused");
     }
 
+    /// The hysteresis table against the f64 Preisach sum over the turning-point stack (nested
+    /// minor loops, then wiped out): within a third of an ADC step.
+    #[test]
+    fn hysteresis_matches_the_f64_preisach_sum() {
+        let t = HysteresisTable::thesis_default();
+        let mut m = HysteresisMemory::new();
+        let mut worst = 0.0f32;
+        for (u, want) in vectors::HYST_INPUT_V
+            .iter()
+            .zip(vectors::HYST_OUTPUT_V.iter())
+        {
+            let d = (t.forward(&mut m, f(*u)) - f(*want)).abs();
+            if d > worst {
+                worst = d;
+            }
+        }
+        defmt::println!(
+            "hysteresis: worst |f32 - f64 Preisach sum| = {=f32} V over {=usize} samples",
+            worst,
+            vectors::HYST_INPUT_V.len()
+        );
+        defmt::assert!(worst < 1e-4);
+    }
+
     /// The hysteresis table on the target: branches are monotone and a minor loop closes
     /// exactly where it started (return-point memory), and the inverse is the forward map's
     /// inverse within 1 mV.
