@@ -5,6 +5,7 @@
 //! The control maths itself lives in `model-core`; this crate calls it and checks it.
 
 pub mod analysis;
+pub mod identify;
 pub mod loop_cmd;
 pub mod qemu;
 pub mod qemu_vectors;

@@ -1,0 +1,7 @@
+//! Identification of the non-linear stage blocks from measured-style records (issue #4
+//! item 6). Design-time `f64`; each function returns the model-core configuration it fills.
+//!
+//! * [`hysteresis`]: the Everett table from a first-order-reversal-curve record (sec. 5.3.4),
+//!   and the generator of that protocol's input.
+
+pub mod hysteresis;
