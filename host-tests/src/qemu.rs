@@ -342,6 +342,16 @@ impl RunOutput {
         )
     }
 
+    /// The stack high-water mark the image printed as `STACK <name> <bytes>`.
+    pub fn stack_bytes(&self, name: &str) -> Option<u32> {
+        self.lines.iter().find_map(|l| {
+            let mut w = l.split_whitespace().skip_while(|w| *w != "STACK");
+            w.next()?;
+            (w.next()? == name).then_some(())?;
+            w.next()?.parse().ok()
+        })
+    }
+
     /// The CPUID part number the image printed (`CPU <n>`).
     pub fn cpu_part(&self) -> Option<u32> {
         self.lines
@@ -462,6 +472,8 @@ pub struct ScenarioReport {
     pub status: Option<i32>,
     /// Host time of the QEMU run.
     pub elapsed: Duration,
+    /// Stack the scenarios needed on the target, bytes (configuration included).
+    pub stack_bytes: Option<u32>,
 }
 
 impl ScenarioReport {
@@ -478,11 +490,12 @@ impl ScenarioReport {
     /// A readable table.
     pub fn table(&self) -> String {
         let mut s = format!(
-            "{} ({}), QEMU exit {:?}, {:.2} s host time; figures compared bit for bit with the host\n",
+            "{} ({}), QEMU exit {:?}, {:.2} s host time, stack {} bytes; figures compared bit for bit with the host\n",
             self.machine.machine,
             self.machine.cpu,
             self.status,
-            self.elapsed.as_secs_f64()
+            self.elapsed.as_secs_f64(),
+            self.stack_bytes.map_or("?".to_string(), |b| b.to_string())
         );
         s += "| scenario | RMS err V | peak err V | final y V | final u V | max du V | faults | latched at | safe at | QEMU check | host == QEMU |\n";
         s += "|---|---|---|---|---|---|---|---|---|---|---|\n";
@@ -605,6 +618,7 @@ pub fn scenarios_on(machine: Machine) -> Result<ScenarioReport> {
         outcomes,
         status: out.status,
         elapsed: out.elapsed,
+        stack_bytes: out.stack_bytes("scenarios"),
     };
     if report.outcomes.iter().all(|o| o.target.is_empty()) {
         bail!(
@@ -666,6 +680,8 @@ pub struct Bench {
     pub calibration_instructions: u32,
     /// Per block.
     pub rows: Vec<BenchRow>,
+    /// Stack one control step needs, bytes.
+    pub step_stack_bytes: Option<u32>,
 }
 
 impl Bench {
@@ -747,6 +763,15 @@ pub fn bench_table(benches: &[Bench]) -> String {
         }
         s += &format!(" {} |\n", bench_description(&r.name));
     }
+    s += "| stack of `Controller::step`, bytes |";
+    for b in benches {
+        s += &format!(
+            " {} |",
+            b.step_stack_bytes
+                .map_or("?".to_string(), |v| v.to_string())
+        );
+    }
+    s += " painted below the caller's frame |\n";
     let step = first.get("controller_step").unwrap_or(f64::NAN);
     s += &format!(
         "Whole step: {step:.1} instructions (goal <= {STEP_BUDGET_GOAL}, defect > {STEP_BUDGET_DEFECT}){}\n",
@@ -826,6 +851,7 @@ pub fn parse_bench(machine: Machine, out: &RunOutput) -> Result<Bench> {
         calibration_ticks: ct,
         calibration_instructions: cn,
         rows,
+        step_stack_bytes: out.stack_bytes("controller_step"),
     })
 }
 
@@ -866,6 +892,7 @@ mod tests {
             outcomes: good,
             status: Some(0),
             elapsed: Duration::ZERO,
+            stack_bytes: None,
         };
         assert!(!report.passed());
     }

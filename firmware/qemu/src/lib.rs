@@ -13,6 +13,10 @@
 //! instruction. SysTick is a 24-bit down-counter: [`InstructionCounter::elapsed`] takes the
 //! difference modulo 2^24, right for spans under 2^24 ticks (671 million instructions).
 //!
+//! # Stack ([`StackProbe`])
+//! The free RAM below the stack pointer is painted with a pattern before the code under test
+//! runs; the deepest overwritten word afterwards is the stack it needed.
+//!
 //! On the host this crate is empty: the images exist for `thumbv7em-none-eabihf` only.
 #![no_std]
 
@@ -84,6 +88,60 @@ mod target {
         /// Give SysTick back.
         pub fn free(self) -> SYST {
             self.syst
+        }
+    }
+
+    /// Fill value of the stack probe.
+    const STACK_PAINT: u32 = 0x5AC3_5AC3;
+    /// Bytes below the stack pointer left unpainted: none (nothing lives below the stack
+    /// pointer on Cortex-M; no red zone).
+    const STACK_GUARD: usize = 0;
+
+    unsafe extern "C" {
+        /// Start of the free RAM after `.bss` (cortex-m-rt): the stack grows down towards it.
+        static mut __sheap: u32;
+    }
+
+    /// Stack high-water mark: [`StackProbe::paint`] fills the free RAM below the present
+    /// stack pointer with a pattern; [`StackProbe::used_bytes`] finds the deepest word
+    /// overwritten since, i.e. how much stack the code run in between needed below the
+    /// painting frame.
+    pub struct StackProbe {
+        sp: usize,
+        low: usize,
+    }
+
+    impl StackProbe {
+        /// Paint the free stack below the caller's stack pointer (inlined, so the pointer is
+        /// the caller's own).
+        #[inline(always)]
+        pub fn paint() -> Self {
+            let sp = cortex_m::register::msp::read() as usize;
+            let low = core::ptr::addr_of!(__sheap) as usize;
+            let top = sp.saturating_sub(STACK_GUARD) & !3;
+            let mut a = (low + 3) & !3;
+            while a < top {
+                // SAFETY: between the end of .bss and below the live stack: memory nobody
+                // uses, word aligned.
+                unsafe { core::ptr::write_volatile(a as *mut u32, STACK_PAINT) };
+                a += 4;
+            }
+            Self {
+                sp,
+                low: (low + 3) & !3,
+            }
+        }
+
+        /// Bytes of stack used below the painting frame since [`Self::paint`].
+        #[inline(never)]
+        pub fn used_bytes(&self) -> u32 {
+            let top = self.sp.saturating_sub(STACK_GUARD) & !3;
+            let mut a = self.low;
+            // SAFETY: reads of the painted, word-aligned range.
+            while a < top && unsafe { core::ptr::read_volatile(a as *const u32) } == STACK_PAINT {
+                a += 4;
+            }
+            (self.sp - a) as u32
         }
     }
 

@@ -14,7 +14,8 @@
 //! instructions), so the figures are what one interrupt pays, not a loop's best case.
 //!
 //! Output: `CPU <part>`, `CAL <ticks> <nops>` (a block of known length, to check the tick
-//! size), `BENCH <name> <ticks> <calls>` per block, `DONE 0`.
+//! size), `BENCH <name> <ticks> <calls>` per block, `STACK controller_step <bytes>` (stack
+//! the step needs, by painting), `DONE 0`.
 #![cfg_attr(target_os = "none", no_std, no_main)]
 
 #[cfg(target_os = "none")]
@@ -27,7 +28,7 @@ mod image {
     use model_core::limits::{Flags, OutputLimits};
     use model_core::plant::{LinearPlant, PlantState};
     use model_core::scenarios::{LinearStage, Scenario, StageModel, thesis_controller};
-    use piezo_qemu::{EXIT_FAIL, EXIT_PASS, InstructionCounter, cpu_part, exit};
+    use piezo_qemu::{EXIT_FAIL, EXIT_PASS, InstructionCounter, StackProbe, cpu_part, exit};
 
     /// Calls per timed loop.
     const N: usize = 1000;
@@ -242,6 +243,14 @@ mod image {
             ));
         });
         report("hysteresis_inverse", ticks);
+
+        // Stack of one control step (painted below this frame, measured after the calls).
+        let mut s = st0;
+        let probe = StackProbe::paint();
+        for i in 0..16 {
+            black_box(controller_step(&controller, &mut s, black_box(rec.adc[i])));
+        }
+        defmt::println!("STACK controller_step {=u32}", probe.used_bytes());
 
         defmt::println!("DONE 0");
         exit(EXIT_PASS)

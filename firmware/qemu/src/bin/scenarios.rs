@@ -4,17 +4,19 @@
 //! compares the figures bit for bit.
 //!
 //! Output lines (one per figure): `CPU <part>`, `FIG <scenario> <field> <u32>`,
-//! `CHECK <scenario> ok` or `CHECK <scenario> FAIL <reason>`, `DONE <failures>`.
+//! `CHECK <scenario> ok` or `CHECK <scenario> FAIL <reason>`, `STACK scenarios <bytes>` (the
+//! stack the scenarios needed, configuration included), `DONE <failures>`.
 #![cfg_attr(target_os = "none", no_std, no_main)]
 
 #[cfg(target_os = "none")]
 mod image {
     use model_core::scenarios::{Scenario, run};
-    use piezo_qemu::{EXIT_FAIL, EXIT_PASS, cpu_part, exit};
+    use piezo_qemu::{EXIT_FAIL, EXIT_PASS, StackProbe, cpu_part, exit};
 
     #[cortex_m_rt::entry]
     fn main() -> ! {
         defmt::println!("CPU {=u32}", cpu_part());
+        let probe = StackProbe::paint();
         let mut failures = 0u32;
         for s in Scenario::ALL {
             match run(s) {
@@ -36,6 +38,7 @@ mod image {
                 }
             }
         }
+        defmt::println!("STACK scenarios {=u32}", probe.used_bytes());
         defmt::println!("DONE {=u32}", failures);
         exit(if failures == 0 { EXIT_PASS } else { EXIT_FAIL })
     }
