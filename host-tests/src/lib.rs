@@ -12,3 +12,4 @@ pub mod qemu_vectors;
 pub mod reference;
 pub mod sim;
 pub mod testing;
+pub mod track;

@@ -23,6 +23,8 @@
 //! * [`controller`]: the one per-sample function the firmware's interrupt and the QEMU runs
 //!   call: modes, faults, compensator, limits.
 //! * [`hysteresis`]: the static hysteretic map (Everett table) with its turning-point memory.
+//! * [`prefilter`]: the reference pre-filter `H'` (eq. 4.12), derived from the loop at run time.
+//! * [`reference`](mod@reference): reference generators (step, ramp, sine, triangle, square, sweep) with preview.
 //!
 //! Each block keeps its configuration (coefficients, `Copy`) apart from its state, so a new
 //! configuration can be computed outside the interrupt and swapped in whole.
@@ -39,6 +41,8 @@ pub mod limits;
 pub mod params;
 pub mod plant;
 pub mod scenarios;
+pub mod prefilter;
+pub mod reference;
 pub mod sections;
 
 pub use codes::{AdcCode, DacCode};

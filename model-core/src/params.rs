@@ -174,3 +174,22 @@ pub const SCENARIO_MOVE_TO_V: f64 = 7.0;
 pub const SCENARIO_ABSURD_KC: f64 = 1.0e9;
 /// Seed of the scenarios' sensor noise generator.
 pub const SCENARIO_NOISE_SEED: u32 = 0x2545_f491;
+// ----- Pre-filter and reference generators (sec. 4.1.2.4, eq. 4.8-4.13; issue #3). -----
+/// Time constant of the four planning poles `1/(tau s + 1)^4` (our assumption, chosen by the
+/// trade-off measured in `host-tests/tests/prefilter.rs`: see the design note of
+/// `prefilter.rs`). The thesis gives no value.
+pub const PREFILTER_TAU_S: f64 = 50e-6;
+/// Shortest tau a configuration may ask for (our assumption: below it the pre-filter's
+/// high-frequency gain `1/(p we wn^2 Kc K tau^4)` passes 1000).
+pub const PREFILTER_TAU_MIN_S: f64 = 10e-6;
+/// Longest tau a configuration may ask for (our assumption: 4 tau = 4 ms of preview).
+pub const PREFILTER_TAU_MAX_S: f64 = 1e-3;
+/// Longest preview (reference advance) a generator offers, samples (our assumption: covers
+/// 4 tau + loop delay at the longest tau and the highest rate).
+pub const MAX_PREVIEW_SAMPLES: u32 = 1024;
+/// Sensor monitor range, volts (E-509: 0..10 V for 0..12 um, sec. 2.4).
+pub const SENSOR_MIN_V: f64 = 0.0;
+/// Sensor monitor range, volts (E-509: 0..10 V for 0..12 um, sec. 2.4).
+pub const SENSOR_MAX_V: f64 = 10.0;
+/// Sensor noise used by the tracking measurements of issue #3 (1 mV, 1 sigma).
+pub const TRACK_NOISE_V: f64 = 1e-3;

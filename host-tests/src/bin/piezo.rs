@@ -19,6 +19,8 @@ enum Command {
     Loop(host_tests::loop_cmd::LoopArgs),
     /// The control code on Cortex-M4F/M7 under QEMU: scenarios, on-target tests, budget.
     Qemu(host_tests::qemu::QemuArgs),
+    /// Tracking error of a periodic reference with and without the pre-filter.
+    Track(host_tests::track::TrackArgs),
 }
 
 fn main() -> std::process::ExitCode {
@@ -26,6 +28,7 @@ fn main() -> std::process::ExitCode {
     let result = match cli.command {
         Command::Loop(a) => host_tests::loop_cmd::run(&a),
         Command::Qemu(a) => host_tests::qemu::run(&a),
+        Command::Track(a) => host_tests::track::run(&a),
     };
     match result {
         Ok(()) => std::process::ExitCode::SUCCESS,

@@ -4,3 +4,4 @@
 
 pub mod hysteresis_truth;
 pub mod lag;
+pub mod prefilter;
