@@ -21,9 +21,14 @@
 //!   the output at each turning point and adds one Everett difference per step, in `f32`).
 //!   Input: nested reversals inside the range (0.5..9.5 V), then a rise that wipes them out.
 //!
+//! * **Pre-filter**: the step response of the default pre-filter (tau = 50 us, delay and
+//!   hold shifted into the preview) from [`RefPreFilter`]: the transfer function evaluated on
+//!   the unit circle and inverted by FFT, independent of model-core's sections.
+//!
 //! Values go in as IEEE bits (`u32`) so the target reads exactly what the host wrote.
 
 use crate::reference::lag::RefLag;
+use crate::reference::prefilter::RefPreFilter;
 use anyhow::{Context, Result};
 use model_core::hysteresis::{GRID_NODES, HysteresisTable};
 use model_core::params;
@@ -44,6 +49,16 @@ pub const SEED: u64 = 0x5eed_0006;
 pub const HYST_TURNS_V: [f64; 12] = [0.5, 9.0, 2.0, 8.0, 3.0, 7.0, 4.0, 6.0, 4.5, 5.5, 9.2, 1.0];
 /// Input step between samples of the hysteresis vector, volts.
 pub const HYST_STEP_V: f64 = 0.1;
+
+/// Samples of the pre-filter's step response.
+pub const PREFILTER_SAMPLES: usize = 300;
+
+/// The default pre-filter's unit step response from rest, `f64` reference.
+pub fn prefilter_reference() -> Vec<f64> {
+    RefPreFilter::thesis(params::PREFILTER_TAU_S)
+        .with_hold()
+        .step_response(PREFILTER_SAMPLES)
+}
 
 /// Where the generated file lives.
 pub fn vectors_path() -> PathBuf {
@@ -267,6 +282,13 @@ pub fn generate() -> String {
         "LAG_COMMAND_V",
         "f64 reference command (RefLag), rounded to f32, volts.",
         reference.iter().map(|&u| u as f32),
+    );
+
+    bits_list(
+        &mut s,
+        "PREFILTER_STEP_V",
+        "Unit step response of the default pre-filter from rest (RefPreFilter, f64), volts.",
+        prefilter_reference().iter().map(|&y| y as f32),
     );
 
     let table = HysteresisTable::thesis_default();

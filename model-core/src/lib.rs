@@ -40,9 +40,9 @@ pub mod lag;
 pub mod limits;
 pub mod params;
 pub mod plant;
-pub mod scenarios;
 pub mod prefilter;
 pub mod reference;
+pub mod scenarios;
 pub mod sections;
 
 pub use codes::{AdcCode, DacCode};

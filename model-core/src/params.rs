@@ -152,17 +152,24 @@ pub const SCENARIO_SETTLE_S: f64 = 10e-3;
 pub const SCENARIO_TRACKING_TOL_V: f64 = 4.0 * SENSOR_NOISE_V;
 /// Frequency of the triangle scenario, Hz.
 pub const SCENARIO_TRIANGLE_HZ: f64 = 100.0;
-/// Bottom of the triangle, sensor volts.
-pub const SCENARIO_TRIANGLE_MIN_V: f64 = 1.0;
-/// Top of the triangle, sensor volts.
-pub const SCENARIO_TRIANGLE_MAX_V: f64 = 8.0;
-/// Bound on the triangle's peak tracking error without pre-filter, sensor volts. Over a
-/// half period (5 ms, far shorter than the lag's 1/p = 2.5 s) the compensator acts as the
-/// integrator `Kc p / s`, so a ramp of slope `s` leaves the error `s / (Kc p K)`
-/// (1400 V/s / 3144 /s = 0.45 V); the bound allows 1.5 times that for the corners.
-pub const SCENARIO_TRIANGLE_PEAK_ERR_V: f64 = 1.5
-    * (2.0 * (SCENARIO_TRIANGLE_MAX_V - SCENARIO_TRIANGLE_MIN_V) * SCENARIO_TRIANGLE_HZ)
-    / (LAG_KC * LAG_POLE_RAD_S * PLANT_GAIN);
+/// Offset of the triangle, sensor volts (issue #3's tracking measurements: 6 V p-p around
+/// 4 V).
+pub const SCENARIO_TRIANGLE_OFFSET_V: f64 = 4.0;
+/// Amplitude (peak) of the triangle, sensor volts.
+pub const SCENARIO_TRIANGLE_AMPLITUDE_V: f64 = 3.0;
+/// Tracking error of the triangle by feedback alone, sensor volts. Over a half period (5 ms,
+/// far shorter than the lag's 1/p = 2.5 s) the compensator acts as the integrator
+/// `Kc p / s`, so a ramp of slope `4 A f` leaves the error `4 A f / (Kc p K)`
+/// (1200 V/s / 3144 /s = 0.38 V).
+pub const SCENARIO_TRIANGLE_VELOCITY_ERR_V: f64 =
+    4.0 * SCENARIO_TRIANGLE_AMPLITUDE_V * SCENARIO_TRIANGLE_HZ
+        / (LAG_KC * LAG_POLE_RAD_S * PLANT_GAIN);
+/// Bound on the feedback-only triangle's peak error, in units of
+/// [`SCENARIO_TRIANGLE_VELOCITY_ERR_V`]: room for the corners.
+pub const SCENARIO_TRIANGLE_PEAK_FACTOR: f64 = 1.5;
+/// The pre-filter must cut the triangle's RMS error below the feedback-only velocity error
+/// divided by this (issue #3: a tenfold cut at 100 Hz).
+pub const SCENARIO_PREFILTER_CUT: f64 = 10.0;
 /// When faults are injected, seconds.
 pub const SCENARIO_FAULT_AT_S: f64 = 0.2;
 /// When the reference moves in the stuck-sensor scenario, seconds (50 ms after the sensor

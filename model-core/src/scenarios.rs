@@ -24,7 +24,8 @@
 //! ([`LinearStage`]); the non-linear stage of ch. 6 implements the same two methods.
 //!
 //! # Scenarios ([`Scenario`])
-//! 0.5 s each at 50 kHz ([`SAMPLES`]): a 0 -> 5 V step, a 100 Hz triangle, and four injected
+//! 0.5 s each at 50 kHz ([`SAMPLES`]): a 0 -> 5 V step, a 100 Hz triangle from the on-board
+//! reference generator through the pre-filter (and, for comparison, without), and four injected
 //! faults on a 5 V set-point (sensor saturates, sensor sticks, NaN reference, absurd gain
 //! commands). [`Figures::check`] states what each must show: the command never leaves the
 //! window nor exceeds the slew limit, faults latch within their detection time and the
@@ -38,6 +39,8 @@ use crate::lag::LagConfig;
 use crate::limits::ConfigError;
 use crate::params;
 use crate::plant::{LinearPlant, LinearPlantConfig, PlantState};
+use crate::prefilter::{PreFilter, PreFilterConfig, PreFilterMode, PreFilterState};
+use crate::reference::{ReferenceConfig, ReferenceGenerator, ReferenceState, Shape};
 use crate::sections::Accumulator;
 
 /// Samples per scenario: [`params::SCENARIO_DURATION_S`] at [`params::SAMPLE_RATE_HZ`].
@@ -55,17 +58,18 @@ pub const SETTLED_AT: u32 = sample_at(params::SCENARIO_STEP_AT_S + params::SCENA
 pub const FAULT_AT: u32 = sample_at(params::SCENARIO_FAULT_AT_S);
 /// Sample at which the reference moves again in the stuck-sensor scenario.
 pub const MOVE_AT: u32 = sample_at(params::SCENARIO_MOVE_AT_S);
-/// Samples per period of the triangle.
-pub const TRIANGLE_PERIOD: u32 = (params::SAMPLE_RATE_HZ / params::SCENARIO_TRIANGLE_HZ) as u32;
 
 /// The scenarios, in the order the QEMU image runs them.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Scenario {
     /// Closed loop, reference 0 V then 5 V (sensor volts) from [`STEP_AT`].
     Step,
-    /// Closed loop, a 100 Hz triangle between [`params::SCENARIO_TRIANGLE_MIN_V`] and
-    /// [`params::SCENARIO_TRIANGLE_MAX_V`].
+    /// Closed loop, a 100 Hz triangle of [`params::SCENARIO_TRIANGLE_AMPLITUDE_V`] around
+    /// [`params::SCENARIO_TRIANGLE_OFFSET_V`] from the on-board [`ReferenceGenerator`], with
+    /// preview, through the [`PreFilter`] (the default, full pre-filter), from [`STEP_AT`].
     Triangle,
+    /// The same triangle with the pre-filter off: feedback alone.
+    TriangleFeedbackOnly,
     /// 5 V set-point; from [`FAULT_AT`] the sensor reads the ADC's top code.
     SensorSaturates,
     /// 5 V set-point; from [`FAULT_AT`] the ADC code freezes; at [`MOVE_AT`] the reference
@@ -80,9 +84,10 @@ pub enum Scenario {
 
 impl Scenario {
     /// Every scenario.
-    pub const ALL: [Self; 6] = [
+    pub const ALL: [Self; 7] = [
         Self::Step,
         Self::Triangle,
+        Self::TriangleFeedbackOnly,
         Self::SensorSaturates,
         Self::SensorSticks,
         Self::NanReference,
@@ -94,6 +99,7 @@ impl Scenario {
         match self {
             Self::Step => "step",
             Self::Triangle => "triangle",
+            Self::TriangleFeedbackOnly => "triangle-feedback-only",
             Self::SensorSaturates => "sensor-saturates",
             Self::SensorSticks => "sensor-sticks",
             Self::NanReference => "nan-reference",
@@ -106,12 +112,15 @@ impl Scenario {
         Self::ALL.into_iter().find(|s| s.name() == name)
     }
 
-    /// The reference at sample `n`, sensor volts.
+    /// The set-point at sample `n`, sensor volts. The triangles' references come from the
+    /// generator ([`ReferenceSource`]); here they are their offset.
     pub fn reference_v(self, n: u32) -> f32 {
         let hold = params::SCENARIO_STEP_V as f32;
         match self {
             Self::Step | Self::AbsurdGain | Self::SensorSaturates => step_reference(n),
-            Self::Triangle => triangle_reference(n),
+            Self::Triangle | Self::TriangleFeedbackOnly => {
+                params::SCENARIO_TRIANGLE_OFFSET_V as f32
+            }
             Self::SensorSticks if n >= MOVE_AT => params::SCENARIO_MOVE_TO_V as f32,
             Self::SensorSticks => step_reference(n),
             Self::NanReference if n >= FAULT_AT => f32::NAN,
@@ -125,7 +134,7 @@ impl Scenario {
             Self::SensorSaturates => Some(Faults::SENSOR_RANGE),
             Self::SensorSticks => Some(Faults::SENSOR_STUCK),
             Self::NanReference => Some(Faults::NONFINITE),
-            Self::Step | Self::Triangle | Self::AbsurdGain => None,
+            Self::Step | Self::Triangle | Self::TriangleFeedbackOnly | Self::AbsurdGain => None,
         }
     }
 }
@@ -138,17 +147,86 @@ fn step_reference(n: u32) -> f32 {
     }
 }
 
-fn triangle_reference(n: u32) -> f32 {
-    let lo = params::SCENARIO_TRIANGLE_MIN_V as f32;
-    let hi = params::SCENARIO_TRIANGLE_MAX_V as f32;
-    if n < STEP_AT {
-        return 0.0;
+/// Where a scenario's reference comes from: its set-point, or the on-board generator (with
+/// preview) and the pre-filter.
+#[derive(Clone, Debug)]
+pub struct ReferenceSource {
+    scenario: Scenario,
+    generated: Option<Generated>,
+}
+
+#[derive(Clone, Debug)]
+struct Generated {
+    generator: ReferenceGenerator,
+    state: ReferenceState,
+    filter: PreFilter,
+    filter_state: PreFilterState,
+}
+
+impl ReferenceSource {
+    /// The source of `scenario`; the pre-filter is derived from the thesis loop (the default
+    /// compensator and plant).
+    pub fn new(scenario: Scenario) -> Result<Self, ConfigError> {
+        let mode = match scenario {
+            Scenario::Triangle => PreFilterMode::Full,
+            Scenario::TriangleFeedbackOnly => PreFilterMode::Off,
+            _ => {
+                return Ok(Self {
+                    scenario,
+                    generated: None,
+                });
+            }
+        };
+        let filter = PreFilter::new(
+            &LagConfig::default(),
+            &LinearPlantConfig::default(),
+            &PreFilterConfig {
+                mode,
+                ..PreFilterConfig::default()
+            },
+        )?;
+        let generator = ReferenceGenerator::new(
+            &ReferenceConfig {
+                shape: Shape::Triangle,
+                offset_v: params::SCENARIO_TRIANGLE_OFFSET_V,
+                amplitude_v: params::SCENARIO_TRIANGLE_AMPLITUDE_V,
+                freq_hz: params::SCENARIO_TRIANGLE_HZ,
+                period_s: 1.0 / params::SAMPLE_RATE_HZ,
+            },
+            filter.preview_samples(),
+        )?;
+        Ok(Self {
+            scenario,
+            generated: Some(Generated {
+                state: generator.start(),
+                generator,
+                filter_state: filter.settled_state(0.0),
+                filter,
+            }),
+        })
     }
-    // Integer phase: exact and the same on every machine.
-    let k = (n - STEP_AT) % TRIANGLE_PERIOD;
-    let half = TRIANGLE_PERIOD / 2;
-    let up = if k < half { k } else { TRIANGLE_PERIOD - k };
-    lo + (hi - lo) * (up as f32 / half as f32)
+
+    /// Sample `n` (called once per sample, in order): `(what the output should be now, what
+    /// the controller is given)`. Before [`STEP_AT`] a generated reference holds its offset
+    /// (the pre-filter takes the loop there smoothly); from then on the generator runs.
+    pub fn next(&mut self, n: u32) -> (f32, f32) {
+        match &mut self.generated {
+            None => {
+                let r = self.scenario.reference_v(n);
+                (r, r)
+            }
+            Some(g) => {
+                let (now, ahead) = if n < STEP_AT {
+                    let r = params::SCENARIO_TRIANGLE_OFFSET_V as f32;
+                    (r, r)
+                } else {
+                    let now = g.generator.now(&g.state);
+                    (now, g.generator.next(&mut g.state))
+                };
+                (now, g.filter.step(&mut g.filter_state, ahead))
+            }
+        }
+    }
 }
 
 /// What the loop drives: input volts at the amplifier's control input, output sensor monitor
@@ -232,8 +310,9 @@ pub const NEVER: u32 = u32::MAX;
 pub struct Figures {
     /// Samples run.
     pub samples: u32,
-    /// Mean of the squared error `r - y` (true stage output) over the samples with a finite
-    /// reference, V^2 (the RMS is its square root, taken by whoever prints it).
+    /// Mean of the squared error `r - y` (true stage output) from [`SETTLED_AT`] on, over the
+    /// samples with a finite reference, V^2 (the RMS is its square root, taken by whoever
+    /// prints it).
     pub mean_sq_err_v2: f32,
     /// Largest `|r - y|` from [`SETTLED_AT`] on (finite references only), volts.
     pub peak_err_v: f32,
@@ -318,8 +397,15 @@ impl Figures {
                 }
                 let tol = params::SCENARIO_TRACKING_TOL_V as f32;
                 let final_err = (self.final_output_v - params::SCENARIO_STEP_V as f32).abs();
+                let velocity_err = params::SCENARIO_TRIANGLE_VELOCITY_ERR_V as f32;
                 if scenario == Scenario::Triangle {
-                    if !within(self.peak_err_v, params::SCENARIO_TRIANGLE_PEAK_ERR_V as f32) {
+                    let bound = velocity_err / params::SCENARIO_PREFILTER_CUT as f32;
+                    if !within(self.mean_sq_err_v2, bound * bound) {
+                        return Err("the pre-filtered triangle's RMS error exceeded its bound");
+                    }
+                } else if scenario == Scenario::TriangleFeedbackOnly {
+                    let bound = params::SCENARIO_TRIANGLE_PEAK_FACTOR as f32 * velocity_err;
+                    if !within(self.peak_err_v, bound) {
                         return Err("the triangle's tracking error exceeded its bound");
                     }
                 } else {
@@ -411,8 +497,14 @@ pub fn run_with<S: StageModel>(
     let mut counted = 0u32;
     let mut stuck_code = AdcCode(0);
     let mut last_command = st.command_v();
+    let mut source = match ReferenceSource::new(scenario) {
+        Ok(src) => src,
+        // A refused pre-filter: the run does not start (`samples` stays 0, which the check
+        // reports).
+        Err(_) => return f,
+    };
     for n in 0..SAMPLES {
-        let r = scenario.reference_v(n);
+        let (r, r_loop) = source.next(n);
         let y = stage.output_v();
         let mut adc = AdcCode::from_volts(stage.measured_v(noise.next()));
         match scenario {
@@ -434,17 +526,17 @@ pub fn run_with<S: StageModel>(
             }
             _ => {}
         }
-        st.set_reference(r);
+        st.set_reference(r_loop);
         let s = ctrl.step(&mut st, adc);
         let u = s.command_v;
         stage.step(s.dac.volts());
 
         f.dac_checksum = fnv1a(f.dac_checksum, s.dac.offset_binary());
-        if r.is_finite() {
+        if r.is_finite() && n >= SETTLED_AT {
             let e = r - y;
             sum_sq.add(e * e);
             counted += 1;
-            if n >= SETTLED_AT && e.abs() > f.peak_err_v {
+            if e.abs() > f.peak_err_v {
                 f.peak_err_v = e.abs();
             }
         }
@@ -512,15 +604,21 @@ mod tests {
     }
 
     #[test]
-    fn triangle_spans_its_range() {
-        let mut lo = f32::MAX;
-        let mut hi = f32::MIN;
-        for n in SETTLED_AT..SETTLED_AT + TRIANGLE_PERIOD {
-            let r = Scenario::Triangle.reference_v(n);
+    fn the_generated_triangle_spans_its_range() {
+        let mut src = ReferenceSource::new(Scenario::TriangleFeedbackOnly).unwrap();
+        let (mut lo, mut hi) = (f32::MAX, f32::MIN);
+        for n in 0..SETTLED_AT + 1000 {
+            let (r, r_loop) = src.next(n);
+            assert_eq!(
+                r, r_loop,
+                "no pre-filter: the loop gets the reference itself"
+            );
             lo = lo.min(r);
             hi = hi.max(r);
         }
-        assert_eq!(lo, params::SCENARIO_TRIANGLE_MIN_V as f32);
-        assert_eq!(hi, params::SCENARIO_TRIANGLE_MAX_V as f32);
+        let off = params::SCENARIO_TRIANGLE_OFFSET_V as f32;
+        let amp = params::SCENARIO_TRIANGLE_AMPLITUDE_V as f32;
+        println!("triangle spans {lo} .. {hi} V");
+        assert!((lo - (off - amp)).abs() < 1e-5 && (hi - (off + amp)).abs() < 1e-5);
     }
 }

@@ -28,6 +28,7 @@ mod tests {
     use model_core::limits::{Flags, OutputLimits};
     use model_core::params;
     use model_core::plant::{LinearPlant, LinearPlantConfig, PlantState};
+    use model_core::prefilter::{PreFilter, PreFilterConfig};
     use model_core::scenarios::thesis_controller;
 
     /// Report the CPU, so the host can check it runs on the machine it asked for.
@@ -117,6 +118,39 @@ mod tests {
         }
         defmt::assert_eq!(DacCode::from_volts(f32::NAN).value(), 0);
         defmt::println!("codes: {=usize} cases exact", vectors::CODE_CASES.len());
+    }
+
+    /// The pre-filter's unit step response against the f64 transfer-function reference
+    /// (inverse FFT): within 2e-5 of its peak (the host test's tolerance).
+    #[test]
+    fn prefilter_step_response_matches_the_f64_reference() {
+        let pf = PreFilter::new(
+            &LagConfig::default(),
+            &LinearPlantConfig::default(),
+            &PreFilterConfig::default(),
+        )
+        .unwrap();
+        let mut s = pf.settled_state(0.0);
+        let mut worst = 0.0f32;
+        let mut peak = 0.0f32;
+        for want in vectors::PREFILTER_STEP_V {
+            let d = (pf.step(&mut s, 1.0) - f(want)).abs();
+            if d > worst {
+                worst = d;
+            }
+            if f(want).abs() > peak {
+                peak = f(want).abs();
+            }
+        }
+        let tol = 2e-5 * peak.max(1.0);
+        defmt::println!(
+            "prefilter: step response peak {=f32}, worst |f32 - f64 reference| = {=f32} over {=usize} samples (tolerance {=f32})",
+            peak,
+            worst,
+            vectors::PREFILTER_STEP_V.len(),
+            tol
+        );
+        defmt::assert!(worst <= tol);
     }
 
     /// The linear plant: nothing moves during the 4.25-sample delay, then the output settles

@@ -24,10 +24,17 @@ mod image {
     use model_core::codes::{AdcCode, DacCode};
     use model_core::controller::{Controller, ControllerState, Mode, Sample};
     use model_core::hysteresis::{HysteresisMemory, HysteresisTable};
+    use model_core::lag::LagConfig;
     use model_core::lag::{LagCompensator, LagState};
     use model_core::limits::{Flags, OutputLimits};
+    use model_core::params;
+    use model_core::plant::LinearPlantConfig;
     use model_core::plant::{LinearPlant, PlantState};
-    use model_core::scenarios::{LinearStage, Scenario, StageModel, thesis_controller};
+    use model_core::prefilter::{PreFilter, PreFilterConfig, PreFilterState};
+    use model_core::reference::{ReferenceConfig, ReferenceGenerator, ReferenceState, Shape};
+    use model_core::scenarios::{
+        LinearStage, ReferenceSource, Scenario, StageModel, thesis_controller,
+    };
     use piezo_qemu::{EXIT_FAIL, EXIT_PASS, InstructionCounter, StackProbe, cpu_part, exit};
 
     /// Calls per timed loop.
@@ -77,6 +84,16 @@ mod image {
     }
 
     #[inline(never)]
+    fn prefilter_step(p: &PreFilter, s: &mut PreFilterState, r: f32) -> f32 {
+        p.step(s, r)
+    }
+
+    #[inline(never)]
+    fn reference_next(g: &ReferenceGenerator, s: &mut ReferenceState) -> f32 {
+        g.next(s)
+    }
+
+    #[inline(never)]
     fn hysteresis_forward(t: &HysteresisTable, m: &mut HysteresisMemory, u: f32) -> f32 {
         t.forward(m, u)
     }
@@ -121,10 +138,13 @@ mod image {
         let (Ok(controller), Ok(mut stage)) = (thesis_controller(), LinearStage::thesis()) else {
             exit(EXIT_FAIL)
         };
+        let Ok(mut source) = ReferenceSource::new(Scenario::Triangle) else {
+            exit(EXIT_FAIL)
+        };
         let mut st = ControllerState::new(&controller);
         st.set_mode(Mode::ClosedLoop);
         for n in 0..WARM_UP {
-            st.set_reference(Scenario::Triangle.reference_v(n));
+            st.set_reference(source.next(n).1);
             let s = controller.step(&mut st, AdcCode::from_volts(stage.output_v()));
             stage.step(s.dac.volts());
         }
@@ -144,7 +164,7 @@ mod image {
         };
         for i in 0..N {
             let n = WARM_UP + i as u32;
-            let r = Scenario::Triangle.reference_v(n);
+            let r = source.next(n).1;
             st.set_reference(r);
             let adc = AdcCode::from_volts(stage.output_v());
             let last = st.command_v();
@@ -218,6 +238,42 @@ mod image {
             ));
         });
         report("plant_step", ticks);
+
+        let Ok(pf) = PreFilter::new(
+            &LagConfig::default(),
+            &LinearPlantConfig::default(),
+            &PreFilterConfig::default(),
+        ) else {
+            exit(EXIT_FAIL)
+        };
+        let mut ps = pf.settled_state(rec.measured_v[0]);
+        let ticks = time(&counter, |i| {
+            black_box(prefilter_step(&pf, &mut ps, black_box(rec.measured_v[i])));
+        });
+        report("prefilter_step", ticks);
+
+        for (name, shape) in [
+            ("reference_sine", Shape::Sine),
+            ("reference_triangle", Shape::Triangle),
+        ] {
+            let Ok(g) = ReferenceGenerator::new(
+                &ReferenceConfig {
+                    shape,
+                    offset_v: params::SCENARIO_TRIANGLE_OFFSET_V,
+                    amplitude_v: params::SCENARIO_TRIANGLE_AMPLITUDE_V,
+                    freq_hz: params::SCENARIO_TRIANGLE_HZ,
+                    ..ReferenceConfig::default()
+                },
+                pf.preview_samples(),
+            ) else {
+                exit(EXIT_FAIL)
+            };
+            let mut gs = g.start();
+            let ticks = time(&counter, |_| {
+                black_box(reference_next(&g, &mut gs));
+            });
+            report(name, ticks);
+        }
 
         let table = HysteresisTable::thesis_default();
         let mut mem = HysteresisMemory::new();
