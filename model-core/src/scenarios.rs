@@ -34,13 +34,15 @@
 //! Bounded: one loop of [`SAMPLES`] iterations, no allocation, no indexing, no panics.
 
 use crate::codes::AdcCode;
-use crate::controller::{Controller, ControllerConfig, ControllerState, Faults, Mode};
+use crate::controller::{
+    Controller, ControllerConfig, ControllerState, Faults, Mode, ReferenceSource,
+};
 use crate::lag::LagConfig;
 use crate::limits::ConfigError;
 use crate::params;
 use crate::plant::{LinearPlant, LinearPlantConfig, PlantState};
-use crate::prefilter::{PreFilter, PreFilterConfig, PreFilterMode, PreFilterState};
-use crate::reference::{ReferenceConfig, ReferenceGenerator, ReferenceState, Shape};
+use crate::prefilter::{PreFilterConfig, PreFilterMode};
+use crate::reference::{ReferenceConfig, Shape};
 use crate::sections::Accumulator;
 
 /// Samples per scenario: [`params::SCENARIO_DURATION_S`] at [`params::SAMPLE_RATE_HZ`].
@@ -62,11 +64,12 @@ pub const MOVE_AT: u32 = sample_at(params::SCENARIO_MOVE_AT_S);
 /// The scenarios, in the order the QEMU image runs them.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Scenario {
-    /// Closed loop, reference 0 V then 5 V (sensor volts) from [`STEP_AT`].
+    /// Closed loop, external reference 0 V then 5 V (sensor volts) from [`STEP_AT`], through
+    /// the default (full) pre-filter.
     Step,
     /// Closed loop, a 100 Hz triangle of [`params::SCENARIO_TRIANGLE_AMPLITUDE_V`] around
-    /// [`params::SCENARIO_TRIANGLE_OFFSET_V`] from the on-board [`ReferenceGenerator`], with
-    /// preview, through the [`PreFilter`] (the default, full pre-filter), from [`STEP_AT`].
+    /// [`params::SCENARIO_TRIANGLE_OFFSET_V`] from the controller's on-board reference
+    /// generator, with preview, through the full pre-filter.
     Triangle,
     /// The same triangle with the pre-filter off: feedback alone.
     TriangleFeedbackOnly,
@@ -112,8 +115,8 @@ impl Scenario {
         Self::ALL.into_iter().find(|s| s.name() == name)
     }
 
-    /// The set-point at sample `n`, sensor volts. The triangles' references come from the
-    /// generator ([`ReferenceSource`]); here they are their offset.
+    /// The external reference at sample `n`, sensor volts. The triangles' references come
+    /// from the controller's generator; here they are its offset (unused).
     pub fn reference_v(self, n: u32) -> f32 {
         let hold = params::SCENARIO_STEP_V as f32;
         match self {
@@ -125,6 +128,36 @@ impl Scenario {
             Self::SensorSticks => step_reference(n),
             Self::NanReference if n >= FAULT_AT => f32::NAN,
             Self::NanReference => hold,
+        }
+    }
+
+    /// The controller's configuration for this scenario: the thesis defaults (full pre-filter,
+    /// external reference), the triangles from the on-board generator.
+    pub fn config(self) -> ControllerConfig {
+        let base = ControllerConfig::default();
+        let triangle = ReferenceConfig {
+            shape: Shape::Triangle,
+            offset_v: params::SCENARIO_TRIANGLE_OFFSET_V,
+            amplitude_v: params::SCENARIO_TRIANGLE_AMPLITUDE_V,
+            freq_hz: params::SCENARIO_TRIANGLE_HZ,
+            ..base.reference
+        };
+        match self {
+            Self::Triangle => ControllerConfig {
+                reference: triangle,
+                source: ReferenceSource::Generator,
+                ..base
+            },
+            Self::TriangleFeedbackOnly => ControllerConfig {
+                reference: triangle,
+                source: ReferenceSource::Generator,
+                prefilter: PreFilterConfig {
+                    mode: PreFilterMode::Off,
+                    ..base.prefilter
+                },
+                ..base
+            },
+            _ => base,
         }
     }
 
@@ -144,88 +177,6 @@ fn step_reference(n: u32) -> f32 {
         params::SCENARIO_STEP_V as f32
     } else {
         0.0
-    }
-}
-
-/// Where a scenario's reference comes from: its set-point, or the on-board generator (with
-/// preview) and the pre-filter.
-#[derive(Clone, Debug)]
-pub struct ReferenceSource {
-    scenario: Scenario,
-    generated: Option<Generated>,
-}
-
-#[derive(Clone, Debug)]
-struct Generated {
-    generator: ReferenceGenerator,
-    state: ReferenceState,
-    filter: PreFilter,
-    filter_state: PreFilterState,
-}
-
-impl ReferenceSource {
-    /// The source of `scenario`; the pre-filter is derived from the thesis loop (the default
-    /// compensator and plant).
-    pub fn new(scenario: Scenario) -> Result<Self, ConfigError> {
-        let mode = match scenario {
-            Scenario::Triangle => PreFilterMode::Full,
-            Scenario::TriangleFeedbackOnly => PreFilterMode::Off,
-            _ => {
-                return Ok(Self {
-                    scenario,
-                    generated: None,
-                });
-            }
-        };
-        let filter = PreFilter::new(
-            &LagConfig::default(),
-            &LinearPlantConfig::default(),
-            &PreFilterConfig {
-                mode,
-                ..PreFilterConfig::default()
-            },
-        )?;
-        let generator = ReferenceGenerator::new(
-            &ReferenceConfig {
-                shape: Shape::Triangle,
-                offset_v: params::SCENARIO_TRIANGLE_OFFSET_V,
-                amplitude_v: params::SCENARIO_TRIANGLE_AMPLITUDE_V,
-                freq_hz: params::SCENARIO_TRIANGLE_HZ,
-                period_s: 1.0 / params::SAMPLE_RATE_HZ,
-            },
-            filter.preview_samples(),
-        )?;
-        Ok(Self {
-            scenario,
-            generated: Some(Generated {
-                state: generator.start(),
-                generator,
-                filter_state: filter.settled_state(0.0),
-                filter,
-            }),
-        })
-    }
-
-    /// Sample `n` (called once per sample, in order): `(what the output should be now, what
-    /// the controller is given)`. Before [`STEP_AT`] a generated reference holds its offset
-    /// (the pre-filter takes the loop there smoothly); from then on the generator runs.
-    pub fn next(&mut self, n: u32) -> (f32, f32) {
-        match &mut self.generated {
-            None => {
-                let r = self.scenario.reference_v(n);
-                (r, r)
-            }
-            Some(g) => {
-                let (now, ahead) = if n < STEP_AT {
-                    let r = params::SCENARIO_TRIANGLE_OFFSET_V as f32;
-                    (r, r)
-                } else {
-                    let now = g.generator.now(&g.state);
-                    (now, g.generator.next(&mut g.state))
-                };
-                (now, g.filter.step(&mut g.filter_state, ahead))
-            }
-        }
     }
 }
 
@@ -466,9 +417,14 @@ pub fn thesis_controller() -> Result<Controller, ConfigError> {
     Controller::new(&ControllerConfig::default())
 }
 
+/// The controller of `scenario` ([`Scenario::config`]).
+pub fn scenario_controller(scenario: Scenario) -> Result<Controller, ConfigError> {
+    Controller::new(&scenario.config())
+}
+
 /// Run `scenario` with the thesis controller on the linear plant of eq. 4.4.
 pub fn run(scenario: Scenario) -> Result<(Controller, Figures), ConfigError> {
-    let controller = thesis_controller()?;
+    let controller = scenario_controller(scenario)?;
     let mut stage = LinearStage::thesis()?;
     let figures = run_with(scenario, &controller, &mut stage);
     Ok((controller, figures))
@@ -497,14 +453,7 @@ pub fn run_with<S: StageModel>(
     let mut counted = 0u32;
     let mut stuck_code = AdcCode(0);
     let mut last_command = st.command_v();
-    let mut source = match ReferenceSource::new(scenario) {
-        Ok(src) => src,
-        // A refused pre-filter: the run does not start (`samples` stays 0, which the check
-        // reports).
-        Err(_) => return f,
-    };
     for n in 0..SAMPLES {
-        let (r, r_loop) = source.next(n);
         let y = stage.output_v();
         let mut adc = AdcCode::from_volts(stage.measured_v(noise.next()));
         match scenario {
@@ -512,7 +461,7 @@ pub fn run_with<S: StageModel>(
             Scenario::SensorSticks if n == FAULT_AT => stuck_code = adc,
             Scenario::SensorSticks if n > FAULT_AT => adc = stuck_code,
             Scenario::AbsurdGain if n == FAULT_AT => {
-                let ok = ControllerConfig::default();
+                let ok = scenario.config();
                 for kc in [params::SCENARIO_ABSURD_KC, f64::NAN, -params::LAG_KC] {
                     let offered = ControllerConfig {
                         lag: LagConfig { kc, ..ok.lag },
@@ -526,8 +475,10 @@ pub fn run_with<S: StageModel>(
             }
             _ => {}
         }
-        st.set_reference(r_loop);
+        st.set_reference(scenario.reference_v(n));
         let s = ctrl.step(&mut st, adc);
+        // The reference in force (the generator's present value, or the external one).
+        let r = s.reference_v;
         let u = s.command_v;
         stage.step(s.dac.volts());
 
@@ -605,14 +556,12 @@ mod tests {
 
     #[test]
     fn the_generated_triangle_spans_its_range() {
-        let mut src = ReferenceSource::new(Scenario::TriangleFeedbackOnly).unwrap();
+        let c = scenario_controller(Scenario::Triangle).unwrap();
+        let mut g = c.generator.start();
         let (mut lo, mut hi) = (f32::MAX, f32::MIN);
-        for n in 0..SETTLED_AT + 1000 {
-            let (r, r_loop) = src.next(n);
-            assert_eq!(
-                r, r_loop,
-                "no pre-filter: the loop gets the reference itself"
-            );
+        for _ in 0..1000 {
+            let r = c.generator.now(&g);
+            c.generator.next(&mut g);
             lo = lo.min(r);
             hi = hi.max(r);
         }

@@ -23,6 +23,7 @@ mod image {
     use core::hint::black_box;
     use model_core::codes::{AdcCode, DacCode};
     use model_core::controller::{Controller, ControllerState, Mode, Sample};
+    use model_core::controller::{ControllerConfig, ReferenceSource};
     use model_core::hysteresis::{HysteresisMemory, HysteresisTable};
     use model_core::lag::LagConfig;
     use model_core::lag::{LagCompensator, LagState};
@@ -30,11 +31,10 @@ mod image {
     use model_core::params;
     use model_core::plant::LinearPlantConfig;
     use model_core::plant::{LinearPlant, PlantState};
+    use model_core::prefilter::PreFilterMode;
     use model_core::prefilter::{PreFilter, PreFilterConfig, PreFilterState};
     use model_core::reference::{ReferenceConfig, ReferenceGenerator, ReferenceState, Shape};
-    use model_core::scenarios::{
-        LinearStage, ReferenceSource, Scenario, StageModel, thesis_controller,
-    };
+    use model_core::scenarios::{LinearStage, Scenario, StageModel, scenario_controller};
     use piezo_qemu::{EXIT_FAIL, EXIT_PASS, InstructionCounter, StackProbe, cpu_part, exit};
 
     /// Calls per timed loop.
@@ -135,20 +135,21 @@ mod image {
             CAL_NOPS
         );
 
-        let (Ok(controller), Ok(mut stage)) = (thesis_controller(), LinearStage::thesis()) else {
-            exit(EXIT_FAIL)
-        };
-        let Ok(mut source) = ReferenceSource::new(Scenario::Triangle) else {
+        // The loop recorded: the triangle from the on-board generator through the pre-filter
+        // (the controller's default trajectory use), on the linear plant.
+        let (Ok(controller), Ok(mut stage)) = (
+            scenario_controller(Scenario::Triangle),
+            LinearStage::thesis(),
+        ) else {
             exit(EXIT_FAIL)
         };
         let mut st = ControllerState::new(&controller);
         st.set_mode(Mode::ClosedLoop);
-        for n in 0..WARM_UP {
-            st.set_reference(source.next(n).1);
+        for _ in 0..WARM_UP {
             let s = controller.step(&mut st, AdcCode::from_volts(stage.output_v()));
             stage.step(s.dac.volts());
         }
-        let st0 = st;
+        let st0 = st.clone();
         let stage0 = stage;
         // The compensator's own state is private to the controller: shadow it with a
         // compensator driven by the same errors from the same command.
@@ -163,16 +164,14 @@ mod image {
             measured_v: [0.0; N],
         };
         for i in 0..N {
-            let n = WARM_UP + i as u32;
-            let r = source.next(n).1;
-            st.set_reference(r);
             let adc = AdcCode::from_volts(stage.output_v());
             let last = st.command_v();
             let s = controller.step(&mut st, adc);
-            controller.lag.update(&mut lag_state, r - s.measured_v);
+            let e = s.reference_v - s.measured_v;
+            controller.lag.update(&mut lag_state, e);
             stage.step(s.dac.volts());
             rec.adc[i] = adc;
-            rec.error_v[i] = r - s.measured_v;
+            rec.error_v[i] = e;
             rec.last_v[i] = last;
             // The limits see the compensator's raw output; the command is a fair stand-in
             // with the same branches (inside the window, within the slew limit).
@@ -186,13 +185,52 @@ mod image {
         });
         report("overhead", overhead);
 
-        let mut s = st0;
+        let mut s = st0.clone();
         let ticks = time(&counter, |i| {
             black_box(controller_step(&controller, &mut s, black_box(rec.adc[i])));
         });
         report("controller_step", ticks);
 
-        let mut s = st0;
+        // Other configurations of the same function, each warmed up on the recorded codes
+        // first (entering closed loop is a one-off cost, not counted).
+        let base = Scenario::Triangle.config();
+        let configs = [
+            (
+                "controller_step_hysteresis_ff",
+                ControllerConfig {
+                    hysteresis_ff: true,
+                    ..base
+                },
+            ),
+            (
+                "controller_step_external_no_prefilter",
+                ControllerConfig {
+                    source: ReferenceSource::External,
+                    prefilter: PreFilterConfig {
+                        mode: PreFilterMode::Off,
+                        ..base.prefilter
+                    },
+                    ..base
+                },
+            ),
+        ];
+        for (name, cfg) in configs {
+            let Ok(c) = Controller::new(&cfg) else {
+                exit(EXIT_FAIL)
+            };
+            let mut s = ControllerState::new(&c);
+            s.set_mode(Mode::ClosedLoop);
+            s.set_reference(params::SCENARIO_TRIANGLE_OFFSET_V as f32);
+            for i in 0..N {
+                controller_step(&c, &mut s, rec.adc[i]);
+            }
+            let ticks = time(&counter, |i| {
+                black_box(controller_step(&c, &mut s, black_box(rec.adc[i])));
+            });
+            report(name, ticks);
+        }
+
+        let mut s = st0.clone();
         s.raise(model_core::controller::Faults::WATCHDOG);
         let ticks = time(&counter, |i| {
             black_box(controller_step(&controller, &mut s, black_box(rec.adc[i])));
@@ -301,7 +339,7 @@ mod image {
         report("hysteresis_inverse", ticks);
 
         // Stack of one control step (painted below this frame, measured after the calls).
-        let mut s = st0;
+        let mut s = st0.clone();
         let probe = StackProbe::paint();
         for i in 0..16 {
             black_box(controller_step(&controller, &mut s, black_box(rec.adc[i])));
