@@ -6,10 +6,15 @@
 
 pub mod analysis;
 pub mod identify;
+pub mod identify_cmd;
 pub mod loop_cmd;
 pub mod qemu;
 pub mod qemu_vectors;
+pub mod model_file;
+pub mod record;
 pub mod reference;
 pub mod sim;
+pub mod simulate;
+pub mod synth;
 pub mod testing;
 pub mod track;

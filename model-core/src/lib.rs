@@ -25,6 +25,8 @@
 //! * [`hysteresis`]: the static hysteretic map (Everett table) with its turning-point memory.
 //! * [`prefilter`]: the reference pre-filter `H'` (eq. 4.12), derived from the loop at run time.
 //! * [`reference`](mod@reference): reference generators (step, ramp, sine, triangle, square, sweep) with preview.
+//! * [`drift`], [`gain`], [`amplifier`], [`sensor`]: the non-linear blocks of ch. 5.
+//! * [`stage`]: the ch. 6 overall model composed of all blocks (the wiring is stated there).
 //!
 //! Each block keeps its configuration (coefficients, `Copy`) apart from its state, so a new
 //! configuration can be computed outside the interrupt and swapped in whole.
@@ -32,9 +34,12 @@
 #![forbid(unsafe_code)]
 #![warn(missing_docs)]
 
+pub mod amplifier;
 pub mod codes;
 pub mod controller;
 pub mod discretize;
+pub mod drift;
+pub mod gain;
 pub mod hysteresis;
 pub mod lag;
 pub mod limits;
@@ -44,5 +49,7 @@ pub mod prefilter;
 pub mod reference;
 pub mod scenarios;
 pub mod sections;
+pub mod sensor;
+pub mod stage;
 
 pub use codes::{AdcCode, DacCode};

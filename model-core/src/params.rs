@@ -200,3 +200,53 @@ pub const SENSOR_MIN_V: f64 = 0.0;
 pub const SENSOR_MAX_V: f64 = 10.0;
 /// Sensor noise used by the tracking measurements of issue #3 (1 mV, 1 sigma).
 pub const TRACK_NOISE_V: f64 = 1e-3;
+
+// =====================================================================================
+// ----- The non-linear stage (issue #4): drift, fast gain, amplifier model, sensor model. -----
+// =====================================================================================
+
+// Drift, eq. 5.1 (sec. 5.2): three parallel first-order lags fitted on a 1 V step.
+/// Gains of the three drift lags, sensor volts per volt of (gain-weighted) input (eq. 5.1).
+pub const DRIFT_GAINS: [f64; 3] = [0.05, 0.05, 0.055];
+/// Time constants of the three drift lags, seconds (eq. 5.1).
+pub const DRIFT_TAUS_S: [f64; 3] = [0.06, 0.75, 12.0];
+/// Normalised drift gain polynomial K(u) = c0 + c1 u + c2 u^2 + c3 u^3, eq. 5.3, coefficients
+/// lowest power first (K(1) = 1).
+pub const DRIFT_POLY: [f64; 4] = [0.6121, 0.5472, -0.1733, 0.0140];
+/// The un-normalised eq. 5.2 (drift gain per volt of step over about 600 s), lowest power
+/// first; kept for the record and for the normalisation test.
+pub const DRIFT_POLY_UNNORMALISED: [f64; 4] = [0.1204, 0.1077, -0.0341, 0.0027];
+/// Range of step heights over which K(u) is evaluated; outside it K is held at the edge value
+/// (our assumption: the thesis fitted 1..6 V steps from 0 V, fig. 3.9; K(0) = 0.61 is finite so
+/// the range is extended down to 0 V; above 6 V the cubic turns up steeply, K(10) = 2.75,
+/// which no data supports).
+pub const DRIFT_POLY_U_RANGE_V: (f64, f64) = (0.0, 6.0);
+
+// Non-linear fast gain K'(u), sec. 3.1 / 5.1 (fig. 3.10): no coefficients printed.
+/// K'(u) = c0 + c1 u + c2 u^2 (our assumption): 1 at 0 V, growing almost linearly with the
+/// input (+2 %/V near 0 V) and flattening to +10 % at 10 V, where its slope is 0 (the
+/// "plateau" of sec. 5.1). `0.79 K'(u) u` stays strictly increasing on the range.
+pub const FAST_GAIN_POLY: [f64; 3] = [1.0, 0.02, -0.001];
+/// Range of inputs over which K'(u) is evaluated; held at the edge values outside (our
+/// assumption: the amplifier's useful 0..10 V at its control input).
+pub const FAST_GAIN_U_RANGE_V: (f64, f64) = (0.0, 10.0);
+
+// Sensor and converters in the stage model.
+/// Sensor gain of the stage model, monitor volts per volt of position (1: the plant's 0.79
+/// already maps to monitor volts; our assumption).
+pub const SENSOR_GAIN: f64 = 1.0;
+/// Default seed of the sensor noise generator (any value; our assumption).
+pub const SENSOR_NOISE_SEED: u64 = 0x005E_ED0F_E509;
+
+// Second resonance mode (issue #7, "two peaks near 5.7 kHz", sec. 4.1.1): disabled by default.
+/// Frequency of a second stage mode when one is switched on, Hz (our assumption).
+pub const SECOND_MODE_HZ: f64 = 6300.0;
+/// Damping of the second mode (our assumption).
+pub const SECOND_MODE_DAMPING: f64 = 0.05;
+/// Largest extra delay the model file accepts, seconds (our assumption; the plant's delay line
+/// holds 62 samples at 50 kHz = 1.24 ms in total).
+pub const MAX_DELAY_S: f64 = 1.0e-3;
+
+// Stage simulation step.
+/// Fixed step of the stage model (the loop rate, sec. 2.3.1).
+pub const STAGE_PERIOD_S: f64 = 1.0 / SAMPLE_RATE_HZ;

@@ -21,6 +21,12 @@ enum Command {
     Qemu(host_tests::qemu::QemuArgs),
     /// Tracking error of a periodic reference with and without the pre-filter.
     Track(host_tests::track::TrackArgs),
+    /// Open-loop response of a model to a recorded input (writes t,u,y).
+    Simulate(host_tests::simulate::SimulateArgs),
+    /// Measured-style records from a model, with noise.
+    Synth(host_tests::synth::SynthArgs),
+    /// Identify drift or hysteresis from a record and write a model file.
+    Identify(host_tests::identify_cmd::IdentifyArgs),
 }
 
 fn main() -> std::process::ExitCode {
@@ -29,6 +35,9 @@ fn main() -> std::process::ExitCode {
         Command::Loop(a) => host_tests::loop_cmd::run(&a),
         Command::Qemu(a) => host_tests::qemu::run(&a),
         Command::Track(a) => host_tests::track::run(&a),
+        Command::Simulate(a) => host_tests::simulate::run(&a),
+        Command::Synth(a) => host_tests::synth::run(&a),
+        Command::Identify(a) => host_tests::identify_cmd::run(&a),
     };
     match result {
         Ok(()) => std::process::ExitCode::SUCCESS,

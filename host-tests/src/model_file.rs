@@ -1,0 +1,537 @@
+//! The model file: a TOML description of the virtual stage ([`model_core::stage`]), and the
+//! built-in models.
+//!
+//! Every effect of the model-gap catalogue (issue #7) is an optional table named exactly like
+//! the effect; **a table present means the effect is on**, with its parameters; a table absent
+//! means off. Unknown keys and tables are refused (`deny_unknown_fields`), so a typo never
+//! silently drops an effect. All values are SI with the unit in the key name.
+//!
+//! ```toml
+//! # piezo model file
+//! name = "thesis-full"            # free text
+//! period_s = 2e-5                 # fixed simulation step (10..200 kHz)
+//!
+//! [plant]                         # eq. 4.4 without delay and 2 kHz pole: always present
+//! static_gain = 0.79              # sensor V per amplifier-input V (used without hysteresis)
+//! mode_hz = 5792.0                # the stage's own mode
+//! damping = 0.08
+//!
+//! [amplifier]                     # E-505 (always present)
+//! gain = 10.0
+//!
+//! [converters]                    # quantisation and sensor (always present)
+//! dac = true                      # 14-bit DAC at the amplifier input
+//! adc = true                      # 16-bit ADC on the monitor
+//! sensor_gain = 1.0
+//! noise_v = 0.0025                # 1-sigma sensor noise
+//! seed = 1                        # noise generator seed (synth --seed overrides)
+//!
+//! [time-delay]                    # effect `time-delay`
+//! delay_s = 8.5e-5
+//!
+//! [amplifier-pole]                # effect `amplifier-pole` (the 2 kHz "electrical" pole)
+//! pole_hz = 2000.0
+//!
+//! [resonance]                     # effect `resonance`: a second mode in series
+//! mode_hz = 6300.0
+//! damping = 0.05
+//!
+//! [drift]                         # effect `drift`, eq. 5.1-5.3
+//! gains = [0.05, 0.05, 0.055]
+//! taus_s = [0.06, 0.75, 12.0]
+//! poly = [0.6121, 0.5472, -0.1733, 0.014]   # K(u), lowest power first
+//! poly_range_v = [0.0, 6.0]
+//!
+//! [nonlinear-gain]                # effect `nonlinear-gain`, K'(u)
+//! poly = [1.0, 0.02, -0.001]
+//! range_v = [0.0, 10.0]
+//!
+//! [slew-rate-limit]               # effect `slew-rate-limit`, at the amplifier output
+//! output_v_per_s = 1.5e6
+//!
+//! [saturation]                    # effect `saturation`: amplifier ranges
+//! input_range_v = [-2.0, 12.0]
+//! output_range_v = [-20.0, 120.0]
+//!
+//! [hysteresis]                    # effect `hysteresis`: the Everett table
+//! input_range_v = [0.0, 10.0]
+//! offset_v = 0.0
+//! everett_v = [0.0175, 0.0359, ...]  # 990 values: the grid, packed lower triangle
+//! # or, instead of everett_v, the parametric congruent-loop form:
+//! # dc_gain = 0.79
+//! # loop_width_frac = 0.185
+//! ```
+//! The built-in names are `thesis-linear` (eq. 4.4 alone: plant, `time-delay`,
+//! `amplifier-pole`; no converters, no noise) and `thesis-full` (the ch. 6 overall model: all of
+//! the above but `resonance`, with the default hysteresis table stored as its grid, converters and the thesis' 2.5 mV noise). Wherever a model
+//! is asked for, a path or a built-in name is accepted ([`ModelFile::load`]).
+
+use anyhow::{Context, bail};
+use model_core::amplifier::AmplifierConfig;
+use model_core::drift::DriftConfig;
+use model_core::gain::FastGainConfig;
+use model_core::hysteresis::HysteresisTable;
+use model_core::params;
+use model_core::sensor::SensorConfig;
+use model_core::stage::{ModeConfig, Stage, StageConfig};
+use serde::{Deserialize, Serialize};
+use std::path::Path;
+
+/// The built-in model names.
+pub const BUILT_IN: [&str; 2] = ["thesis-linear", "thesis-full"];
+
+/// `[plant]`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PlantSection {
+    /// Static gain without hysteresis.
+    pub static_gain: f64,
+    /// Stage mode, Hz.
+    pub mode_hz: f64,
+    /// Stage mode damping.
+    pub damping: f64,
+}
+
+/// `[amplifier]`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct AmplifierSection {
+    /// Voltage gain.
+    pub gain: f64,
+}
+
+/// `[converters]`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ConvertersSection {
+    /// 14-bit DAC quantisation.
+    pub dac: bool,
+    /// 16-bit ADC quantisation.
+    pub adc: bool,
+    /// Sensor gain.
+    pub sensor_gain: f64,
+    /// Sensor noise, 1 sigma, volts.
+    pub noise_v: f64,
+    /// Noise seed.
+    pub seed: u64,
+}
+
+/// `[time-delay]`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct DelaySection {
+    /// Pure delay, seconds.
+    pub delay_s: f64,
+}
+
+/// `[amplifier-pole]`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PoleSection {
+    /// Pole, Hz.
+    pub pole_hz: f64,
+}
+
+/// `[resonance]`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ResonanceSection {
+    /// Mode, Hz.
+    pub mode_hz: f64,
+    /// Damping ratio.
+    pub damping: f64,
+}
+
+/// `[drift]`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct DriftSection {
+    /// Lag gains.
+    pub gains: [f64; 3],
+    /// Lag time constants, s.
+    pub taus_s: [f64; 3],
+    /// K(u), lowest power first.
+    pub poly: [f64; 4],
+    /// Range over which K is evaluated, V.
+    pub poly_range_v: [f64; 2],
+}
+
+/// `[nonlinear-gain]`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct GainSection {
+    /// K'(u), lowest power first.
+    pub poly: [f64; 3],
+    /// Range over which K' is evaluated, V.
+    pub range_v: [f64; 2],
+}
+
+/// `[slew-rate-limit]`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SlewSection {
+    /// Slew limit at the amplifier output, V/s.
+    pub output_v_per_s: f64,
+}
+
+/// `[hysteresis]`: the Everett table of [`model_core::hysteresis`], either as its grid
+/// (`everett_v`, the packed lower triangle, [`model_core::hysteresis::TABLE_LEN`] values) or in
+/// the parametric congruent-loop form (`dc_gain` and `loop_width_frac`, see
+/// [`HysteresisTable::quadratic_everett`]); exactly one of the two.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct HysteresisSection {
+    /// Input range of the table, volts at the amplifier input.
+    pub input_range_v: [f64; 2],
+    /// Output at the bottom of the range, sensor volts.
+    pub offset_v: f64,
+    /// Parametric form: average gain over the major loop.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub dc_gain: Option<f64>,
+    /// Parametric form: largest loop width as a fraction of the output span.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub loop_width_frac: Option<f64>,
+    /// Grid form: the packed Everett values, sensor volts.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub everett_v: Option<Vec<f32>>,
+}
+
+impl HysteresisSection {
+    /// The grid form of `t`.
+    pub fn from_table(t: &HysteresisTable) -> Self {
+        let (lo, hi) = t.input_range_v();
+        Self {
+            input_range_v: [lo as f64, hi as f64],
+            offset_v: t.offset_v() as f64,
+            dc_gain: None,
+            loop_width_frac: None,
+            everett_v: Some(t.everett_grid_v().to_vec()),
+        }
+    }
+
+    /// The table, or an error naming the problem.
+    pub fn table(&self) -> anyhow::Result<HysteresisTable> {
+        let [lo, hi] = self.input_range_v;
+        let r = match (&self.everett_v, self.dc_gain, self.loop_width_frac) {
+            (Some(e), None, None) => {
+                HysteresisTable::from_grid(lo as f32, hi as f32, self.offset_v as f32, e)
+            }
+            (None, Some(g), Some(w)) => {
+                HysteresisTable::quadratic_everett(lo, hi, self.offset_v, g, w)
+            }
+            _ => bail!(
+                "[hysteresis] needs either `everett_v` (the grid) or both `dc_gain` and `loop_width_frac`"
+            ),
+        };
+        r.map_err(|e| {
+            anyhow::anyhow!(
+                "[hysteresis]: {e} (grid of {} values, non-negative, rising in alpha and falling in beta; range inside -2..12 V)",
+                model_core::hysteresis::TABLE_LEN
+            )
+        })
+    }
+}
+
+/// `[saturation]`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SaturationSection {
+    /// Amplifier control input range, V.
+    pub input_range_v: [f64; 2],
+    /// Amplifier output range, V.
+    pub output_range_v: [f64; 2],
+}
+
+/// A model file.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ModelFile {
+    /// Free text.
+    #[serde(default)]
+    pub name: String,
+    /// Simulation step, seconds.
+    pub period_s: f64,
+    /// The linear stage.
+    pub plant: PlantSection,
+    /// The amplifier.
+    pub amplifier: AmplifierSection,
+    /// Converters and sensor.
+    pub converters: ConvertersSection,
+    /// `time-delay`.
+    #[serde(
+        rename = "time-delay",
+        default,
+        skip_serializing_if = "Option::is_none"
+    )]
+    pub time_delay: Option<DelaySection>,
+    /// `amplifier-pole`.
+    #[serde(
+        rename = "amplifier-pole",
+        default,
+        skip_serializing_if = "Option::is_none"
+    )]
+    pub amplifier_pole: Option<PoleSection>,
+    /// `resonance`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub resonance: Option<ResonanceSection>,
+    /// `drift`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub drift: Option<DriftSection>,
+    /// `nonlinear-gain`.
+    #[serde(
+        rename = "nonlinear-gain",
+        default,
+        skip_serializing_if = "Option::is_none"
+    )]
+    pub nonlinear_gain: Option<GainSection>,
+    /// `slew-rate-limit`.
+    #[serde(
+        rename = "slew-rate-limit",
+        default,
+        skip_serializing_if = "Option::is_none"
+    )]
+    pub slew_rate_limit: Option<SlewSection>,
+    /// `saturation`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub saturation: Option<SaturationSection>,
+    /// `hysteresis` (last: its grid is long).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub hysteresis: Option<HysteresisSection>,
+}
+
+impl ModelFile {
+    /// A built-in model by name.
+    pub fn built_in(name: &str) -> Option<Self> {
+        match name {
+            "thesis-linear" => Some(Self::from_stage_config(
+                "thesis-linear",
+                &StageConfig::thesis_linear(),
+            )),
+            "thesis-full" => Some(Self::from_stage_config(
+                "thesis-full",
+                &StageConfig::thesis_full(),
+            )),
+            _ => None,
+        }
+    }
+
+    /// A built-in name, or else a path to a model file.
+    pub fn load(name_or_path: &str) -> anyhow::Result<Self> {
+        if let Some(m) = Self::built_in(name_or_path) {
+            return Ok(m);
+        }
+        let path = Path::new(name_or_path);
+        if !path.exists() {
+            bail!(
+                "model `{name_or_path}` is neither a file nor a built-in name ({})",
+                BUILT_IN.join(", ")
+            );
+        }
+        let text = std::fs::read_to_string(path)
+            .with_context(|| format!("cannot read model file {}", path.display()))?;
+        Self::parse(&text).with_context(|| format!("model file {}", path.display()))
+    }
+
+    /// Parse TOML text and check that it builds a stage.
+    pub fn parse(text: &str) -> anyhow::Result<Self> {
+        let m: Self =
+            toml::from_str(text).map_err(|e| anyhow::anyhow!("{}", e.to_string().trim_end()))?;
+        m.build_stage()?;
+        Ok(m)
+    }
+
+    /// The TOML text, with a comment header.
+    pub fn to_toml(&self) -> anyhow::Result<String> {
+        let body = toml::to_string(self).context("serialising the model")?;
+        Ok(format!(
+            "# piezo model file (see host-tests/src/model_file.rs for every key).\n\
+             # A table named after an effect switches it on.\n{body}"
+        ))
+    }
+
+    /// Write to `path`.
+    pub fn write(&self, path: &Path) -> anyhow::Result<()> {
+        std::fs::write(path, self.to_toml()?)
+            .with_context(|| format!("cannot write {}", path.display()))
+    }
+
+    /// The model file describing `c`.
+    pub fn from_stage_config(name: &str, c: &StageConfig) -> Self {
+        let pair = |p: (f64, f64)| [p.0, p.1];
+        Self {
+            name: name.into(),
+            period_s: c.period_s,
+            plant: PlantSection {
+                static_gain: c.static_gain,
+                mode_hz: c.mode.mode_hz,
+                damping: c.mode.damping,
+            },
+            amplifier: AmplifierSection {
+                gain: c.amplifier.gain,
+            },
+            converters: ConvertersSection {
+                dac: c.dac,
+                adc: c.sensor.adc,
+                sensor_gain: c.sensor.gain,
+                noise_v: c.sensor.noise_v,
+                seed: c.sensor.seed,
+            },
+            time_delay: (c.delay_s > 0.0).then_some(DelaySection { delay_s: c.delay_s }),
+            amplifier_pole: c.amp_pole_hz.map(|pole_hz| PoleSection { pole_hz }),
+            resonance: c.second_mode.map(|m| ResonanceSection {
+                mode_hz: m.mode_hz,
+                damping: m.damping,
+            }),
+            drift: c.drift.map(|d| DriftSection {
+                gains: d.gains,
+                taus_s: d.taus_s,
+                poly: d.poly,
+                poly_range_v: pair(d.poly_range_v),
+            }),
+            nonlinear_gain: c.nonlinear_gain.map(|g| GainSection {
+                poly: g.poly,
+                range_v: pair(g.range_v),
+            }),
+            slew_rate_limit: c
+                .amplifier
+                .slew_v_per_s
+                .map(|s| SlewSection { output_v_per_s: s }),
+            saturation: c.amplifier.saturation.then_some(SaturationSection {
+                input_range_v: pair(c.amplifier.input_range_v),
+                output_range_v: pair(c.amplifier.output_range_v),
+            }),
+            hysteresis: c.hysteresis.as_ref().map(HysteresisSection::from_table),
+        }
+    }
+
+    /// The stage configuration this file describes; the hysteresis table is checked here, the
+    /// rest by [`Self::build_stage`].
+    pub fn stage_config(&self) -> anyhow::Result<StageConfig> {
+        let hysteresis = self
+            .hysteresis
+            .as_ref()
+            .map(HysteresisSection::table)
+            .transpose()?;
+        let pair = |p: [f64; 2]| (p[0], p[1]);
+        let sat = self.saturation.as_ref();
+        Ok(StageConfig {
+            period_s: self.period_s,
+            hysteresis,
+            dac: self.converters.dac,
+            amplifier: AmplifierConfig {
+                gain: self.amplifier.gain,
+                input_range_v: sat
+                    .map_or((params::AMP_INPUT_MIN_V, params::AMP_INPUT_MAX_V), |s| {
+                        pair(s.input_range_v)
+                    }),
+                output_range_v: sat
+                    .map_or((params::AMP_OUTPUT_MIN_V, params::AMP_OUTPUT_MAX_V), |s| {
+                        pair(s.output_range_v)
+                    }),
+                slew_v_per_s: self.slew_rate_limit.as_ref().map(|s| s.output_v_per_s),
+                saturation: sat.is_some(),
+            },
+            static_gain: self.plant.static_gain,
+            nonlinear_gain: self.nonlinear_gain.as_ref().map(|g| FastGainConfig {
+                poly: g.poly,
+                range_v: pair(g.range_v),
+            }),
+            drift: self.drift.as_ref().map(|d| DriftConfig {
+                gains: d.gains,
+                taus_s: d.taus_s,
+                poly: d.poly,
+                poly_range_v: pair(d.poly_range_v),
+            }),
+            amp_pole_hz: self.amplifier_pole.as_ref().map(|p| p.pole_hz),
+            mode: ModeConfig {
+                mode_hz: self.plant.mode_hz,
+                damping: self.plant.damping,
+            },
+            second_mode: self.resonance.as_ref().map(|r| ModeConfig {
+                mode_hz: r.mode_hz,
+                damping: r.damping,
+            }),
+            delay_s: self.time_delay.as_ref().map_or(0.0, |d| d.delay_s),
+            sensor: SensorConfig {
+                gain: self.converters.sensor_gain,
+                noise_v: self.converters.noise_v,
+                adc: self.converters.adc,
+                seed: self.converters.seed,
+            },
+        })
+    }
+
+    /// Checks each table on its own, so that an error names the table and the rule.
+    pub fn check(&self) -> anyhow::Result<()> {
+        let c = self.stage_config()?;
+        let rate = 1.0 / c.period_s;
+        if !(c.period_s.is_finite()
+            && (params::MIN_SAMPLE_RATE_HZ..=params::MAX_SAMPLE_RATE_HZ * (1.0 + 1e-9))
+                .contains(&rate))
+        {
+            bail!(
+                "period_s = {} must give a rate within 10..200 kHz",
+                c.period_s
+            );
+        }
+        let nyquist = 0.5 * rate;
+        if !(c.static_gain.is_finite() && c.static_gain > 0.05 && c.static_gain < 20.0) {
+            bail!(
+                "[plant] static_gain = {} must be within 0.05..20",
+                c.static_gain
+            );
+        }
+        if !(c.mode.mode_hz > 0.0
+            && c.mode.mode_hz < nyquist
+            && c.mode.damping > 0.0
+            && c.mode.damping <= 10.0)
+        {
+            bail!("[plant] mode_hz must be within 0..{nyquist} Hz and damping within 0..10");
+        }
+        if !(c.delay_s >= 0.0 && c.delay_s <= params::MAX_DELAY_S) {
+            bail!(
+                "[time-delay] delay_s = {} must be within 0..{} s",
+                c.delay_s,
+                params::MAX_DELAY_S
+            );
+        }
+        if let Some(p) = c.amp_pole_hz
+            && !(p > 0.0 && p < 10.0 * nyquist)
+        {
+            bail!(
+                "[amplifier-pole] pole_hz = {p} must be within 0..{} Hz",
+                10.0 * nyquist
+            );
+        }
+        if let Some(m) = c.second_mode
+            && !(m.mode_hz > 0.0 && m.mode_hz < nyquist && m.damping > 0.0 && m.damping <= 10.0)
+        {
+            bail!("[resonance] mode_hz must be within 0..{nyquist} Hz and damping within 0..10");
+        }
+        if let Some(d) = c.drift {
+            d.validate().map_err(|e| {
+                anyhow::anyhow!(
+                    "[drift]: {e} (time constants 1 us..1e5 s, gains within +-1, K(u) u increasing)"
+                )
+            })?;
+        }
+        if let Some(g) = c.nonlinear_gain {
+            g.validate().map_err(|e| {
+                anyhow::anyhow!("[nonlinear-gain]: {e} (K' within 0.2..5, K'(u) u increasing)")
+            })?;
+        }
+        c.amplifier
+            .validate()
+            .map_err(|e| anyhow::anyhow!("[amplifier] / [slew-rate-limit] / [saturation]: {e} (gain 1..100, slew 15..1500 V/ms, ranges inside -2..12 V in and -20..120 V out)"))?;
+        model_core::sensor::Sensor::new(&c.sensor).map_err(|e| {
+            anyhow::anyhow!("[converters]: {e} (sensor_gain 0.1..10, noise_v 0..1 V)")
+        })?;
+        Ok(())
+    }
+
+    /// The model-core stage, or an error naming the refused table.
+    pub fn build_stage(&self) -> anyhow::Result<Stage> {
+        self.check()?;
+        Stage::new(&self.stage_config()?).map_err(|e| anyhow::anyhow!("invalid model: {e}"))
+    }
+}

@@ -1,0 +1,16 @@
+//! `f64` reference of the fast static map `0.79 K'(u) u` (sec. 3.1, 5.1; coefficients our
+//! assumption in params.rs).
+
+use model_core::params;
+
+/// K'(u) in plain powers, held outside 0..10 V.
+pub fn k_fast(u_v: f64) -> f64 {
+    let x = u_v.clamp(params::FAST_GAIN_U_RANGE_V.0, params::FAST_GAIN_U_RANGE_V.1);
+    let c = params::FAST_GAIN_POLY;
+    c[2] * x * x + c[1] * x + c[0]
+}
+
+/// The fast part's static output, sensor volts.
+pub fn fast_output(u_v: f64) -> f64 {
+    params::PLANT_GAIN * k_fast(u_v) * u_v
+}

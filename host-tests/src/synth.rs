@@ -1,0 +1,224 @@
+//! `piezo synth --model MODEL --protocol forc|steps|triangle|sine|chirp --seed N --output FILE.csv`:
+//! measured-style records from any model, with its sensor noise (seeded) and converters.
+//!
+//! The input is built at the record's rate (`--rate`) and simulated exactly as
+//! `piezo simulate` does ([`crate::simulate::simulate`]), so simulating the written record's
+//! `u` with the same model reproduces its `y` apart from the noise.
+//!
+//! Protocols (all start at `--offset` and span `--amplitude` above it):
+//! * `steps`: `--offset` for the first tenth of `--hold` (at most 0.1 s), then a step to
+//!   `offset + amplitude`; every further `--hold` seconds a new level drawn uniformly in
+//!   `offset..offset + amplitude` from `--seed`. The default `--hold` is the whole record: one
+//!   step, the drift identification's input.
+//! * `triangle`: `offset + amplitude * tri(freq t)`, rising first.
+//! * `sine`: `offset + amplitude (1 - cos(2 pi freq t)) / 2` (starts at rest).
+//! * `chirp`: the same with the frequency swept linearly from `--freq` to `--freq-end`.
+//! * `forc`: first-order reversal curves as the thesis recorded them (sec. 5.3.4), from the
+//!   hysteresis identification's generator [`forc_protocol`]: preconditioning sine at `--freq`
+//!   (1 Hz in the thesis), turning values every 0.15 V over `offset..offset + amplitude`,
+//!   10 V/s ramps; the record is as long as the protocol needs (`--seconds` is ignored).
+
+use crate::identify::hysteresis::{ForcProtocol, forc_protocol};
+use crate::model_file::ModelFile;
+use crate::record::Record;
+use crate::simulate::simulate;
+use anyhow::{bail, ensure};
+use clap::{Args, ValueEnum};
+use rand::{Rng, SeedableRng};
+use std::f64::consts::PI;
+use std::path::PathBuf;
+
+/// The input protocols.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum Protocol {
+    /// First-order reversal curves (sec. 5.3.4).
+    Forc,
+    /// A step, then random levels.
+    Steps,
+    /// Triangle.
+    Triangle,
+    /// Raised sine.
+    Sine,
+    /// Raised sine with a linear frequency sweep.
+    Chirp,
+}
+
+/// Arguments of `piezo synth`.
+#[derive(Args, Debug, Clone)]
+pub struct SynthArgs {
+    /// Model file or built-in name (thesis-linear, thesis-full).
+    #[arg(long)]
+    pub model: String,
+    /// Input protocol.
+    #[arg(long, value_enum)]
+    pub protocol: Protocol,
+    /// Seed of the sensor noise and of random levels.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Output record (CSV t,u,y).
+    #[arg(long)]
+    pub output: PathBuf,
+    /// Record length, seconds.
+    #[arg(long, default_value_t = 2.0)]
+    pub seconds: f64,
+    /// Record sampling rate, Hz.
+    #[arg(long, default_value_t = 50_000.0)]
+    pub rate: f64,
+    /// Span of the input above the offset, volts (forc: use 10 for the 0..10 V table).
+    #[arg(long, default_value_t = 6.0)]
+    pub amplitude: f64,
+    /// Lowest input, volts.
+    #[arg(long, default_value_t = 0.0)]
+    pub offset: f64,
+    /// Frequency of triangle/sine, start frequency of the chirp, Hz.
+    #[arg(long, default_value_t = 1.0)]
+    pub freq: f64,
+    /// End frequency of the chirp, Hz.
+    #[arg(long, default_value_t = 100.0)]
+    pub freq_end: f64,
+    /// Time per level of `steps`, seconds (default: the whole record, i.e. one step).
+    #[arg(long)]
+    pub hold: Option<f64>,
+    /// Sensor noise, volts 1-sigma (default: the model's).
+    #[arg(long)]
+    pub noise_v: Option<f64>,
+}
+
+impl SynthArgs {
+    fn check(&self) -> anyhow::Result<()> {
+        ensure!(
+            self.seconds.is_finite() && self.seconds > 0.0 && self.seconds <= 3600.0,
+            "--seconds must be within (0, 3600]"
+        );
+        ensure!(
+            self.rate.is_finite() && (10.0..=1e6).contains(&self.rate),
+            "--rate must be within 10 Hz..1 MHz"
+        );
+        ensure!(
+            self.seconds * self.rate <= 5e7,
+            "record too long: at most 5e7 samples"
+        );
+        ensure!(
+            self.seconds * self.rate >= 2.0,
+            "record too short: fewer than 2 samples"
+        );
+        ensure!(
+            self.amplitude.is_finite() && self.offset.is_finite(),
+            "--amplitude and --offset must be finite"
+        );
+        ensure!(
+            self.offset >= -2.0 && self.offset + self.amplitude <= 12.0 && self.amplitude >= 0.0,
+            "the input must stay within the amplifier's -2..12 V: offset {} + amplitude {}",
+            self.offset,
+            self.amplitude
+        );
+        ensure!(
+            self.freq.is_finite() && self.freq > 0.0 && self.freq < self.rate / 2.0,
+            "--freq must be within (0, rate/2)"
+        );
+        ensure!(
+            self.freq_end.is_finite() && self.freq_end > 0.0 && self.freq_end < self.rate / 2.0,
+            "--freq-end must be within (0, rate/2)"
+        );
+        if let Some(h) = self.hold {
+            ensure!(h.is_finite() && h > 0.0, "--hold must be positive");
+        }
+        if let Some(n) = self.noise_v {
+            ensure!(
+                n.is_finite() && (0.0..=1.0).contains(&n),
+                "--noise-v must be within 0..1 V"
+            );
+        }
+        Ok(())
+    }
+}
+
+/// The protocol's input at the record times `t_s`.
+pub fn input(a: &SynthArgs, t_s: &[f64]) -> anyhow::Result<Vec<f64>> {
+    let (o, amp, f) = (a.offset, a.amplitude, a.freq);
+    Ok(match a.protocol {
+        Protocol::Steps => {
+            let hold = a.hold.unwrap_or(a.seconds);
+            let t_step = (0.1 * hold).min(0.1);
+            let mut rng = rand::rngs::StdRng::seed_from_u64(a.seed ^ 0xA5A5_5A5A);
+            let mut level = o + amp;
+            let mut next = t_step + hold;
+            t_s.iter()
+                .map(|&t| {
+                    if t < t_step {
+                        return o;
+                    }
+                    while t >= next {
+                        level = o + amp * rng.r#gen::<f64>();
+                        next += hold;
+                    }
+                    level
+                })
+                .collect()
+        }
+        Protocol::Triangle => t_s
+            .iter()
+            .map(|&t| {
+                let p = (t * f).rem_euclid(1.0);
+                o + amp * if p < 0.5 { 2.0 * p } else { 2.0 - 2.0 * p }
+            })
+            .collect(),
+        Protocol::Sine => t_s
+            .iter()
+            .map(|&t| o + amp * 0.5 * (1.0 - (2.0 * PI * f * t).cos()))
+            .collect(),
+        Protocol::Chirp => {
+            let k = (a.freq_end - f) / a.seconds;
+            t_s.iter()
+                .map(|&t| o + amp * 0.5 * (1.0 - (2.0 * PI * (f * t + 0.5 * k * t * t)).cos()))
+                .collect()
+        }
+        Protocol::Forc => bail!("the forc protocol defines its own sample times"),
+    })
+}
+
+/// Build the record `a` asks for.
+pub fn synth(a: &SynthArgs) -> anyhow::Result<Record> {
+    a.check()?;
+    let mut model = ModelFile::load(&a.model)?;
+    model.converters.seed = a.seed;
+    if let Some(n) = a.noise_v {
+        model.converters.noise_v = n;
+    }
+    let stage = model.build_stage()?;
+    let (t_s, u_v) = if a.protocol == Protocol::Forc {
+        let p = ForcProtocol {
+            rate_hz: a.rate,
+            u_min_v: a.offset,
+            u_max_v: a.offset + a.amplitude,
+            precondition_hz: a.freq,
+            ..ForcProtocol::default()
+        };
+        let u = forc_protocol(&p)?;
+        ensure!(u.len() >= 2, "the FORC protocol gave fewer than 2 samples");
+        let t: Vec<f64> = (0..u.len()).map(|i| i as f64 / a.rate).collect();
+        (t, u)
+    } else {
+        let n = (a.seconds * a.rate).round() as usize;
+        let t_s: Vec<f64> = (0..n).map(|i| i as f64 / a.rate).collect();
+        let u_v = input(a, &t_s)?;
+        (t_s, u_v)
+    };
+    let y = simulate(&stage, model.period_s, &t_s, &u_v);
+    Ok(Record::new(t_s, u_v, Some(y), None)?)
+}
+
+/// Run `piezo synth`.
+pub fn run(a: &SynthArgs) -> anyhow::Result<()> {
+    let rec = synth(a)?;
+    rec.write(&a.output)?;
+    eprintln!(
+        "wrote {} samples ({} s at {} Hz, protocol {:?}) to {}",
+        rec.len(),
+        a.seconds,
+        a.rate,
+        a.protocol,
+        a.output.display()
+    );
+    Ok(())
+}

@@ -1,0 +1,126 @@
+//! The non-linear static gain of the fast part, K'(u) (sec. 3.1, 5.1, fig. 3.10).
+//!
+//! The thesis measured the fast part's gain 5 ms after steps of 1..6 V from 0 V: it "shows an
+//! almost linear variation and a proportional increase with respect to the input step height"
+//! and "plateaus off at higher input amplitudes" (sec. 5.1). It fits a polynomial but prints no
+//! coefficients, so ours are an assumption ([`params::FAST_GAIN_POLY`]):
+//!
+//! ```text
+//! K'(u) = 1 + 0.02 u - 0.001 u^2,   u clamped to 0..10 V
+//! ```
+//! 1 at 0 V (so small signals near 0 V see the linear model's 0.79), +2 %/V at first, flat at
+//! 10 V where it reaches 1.10.
+//!
+//! As for the drift ([`crate::drift`]) the step height is generalised to the present input: the
+//! fast static map is `p(u) = K'(u) h(u)` with `h` the hysteresis (or `0.79 u` without it). This
+//! keeps the block memoryless, exact for steps from 0 V, and invertible: `K'(u) u` is strictly
+//! increasing (slope `1 + 0.04 u - 0.003 u^2 >= 1` on 0..10 V), checked by
+//! [`FastGainConfig::validate`].
+
+use crate::limits::ConfigError;
+use crate::params;
+
+/// K'(u) (design time, `f64`).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct FastGainConfig {
+    /// Polynomial coefficients, lowest power first.
+    pub poly: [f64; 3],
+    /// Input range over which the polynomial is evaluated, volts; held at the edges outside.
+    pub range_v: (f64, f64),
+}
+
+impl Default for FastGainConfig {
+    /// Our assumption, [`params::FAST_GAIN_POLY`].
+    fn default() -> Self {
+        Self {
+            poly: params::FAST_GAIN_POLY,
+            range_v: params::FAST_GAIN_U_RANGE_V,
+        }
+    }
+}
+
+impl FastGainConfig {
+    /// K'(u) in `f64`.
+    pub fn gain(&self, u_v: f64) -> f64 {
+        let x = u_v.clamp(self.range_v.0, self.range_v.1);
+        self.poly[0] + x * (self.poly[1] + x * self.poly[2])
+    }
+
+    /// Finite, K' within 0.2..5 over the range, non-empty range inside -20..20 V, and
+    /// `K'(u) u` strictly increasing on -20..20 V.
+    pub fn validate(&self) -> Result<(), ConfigError> {
+        if self.poly.iter().any(|v| !v.is_finite())
+            || !self.range_v.0.is_finite()
+            || !self.range_v.1.is_finite()
+        {
+            return Err(ConfigError::NotFinite);
+        }
+        if !(self.range_v.0 < self.range_v.1 && self.range_v.0 >= -20.0 && self.range_v.1 <= 20.0) {
+            return Err(ConfigError::BadGain);
+        }
+        let mut last = f64::NEG_INFINITY;
+        for i in 0..=4000 {
+            let u = -20.0 + 40.0 * i as f64 / 4000.0;
+            let k = self.gain(u);
+            if !(0.2..=5.0).contains(&k) || k * u <= last {
+                return Err(ConfigError::BadGain);
+            }
+            last = k * u;
+        }
+        Ok(())
+    }
+}
+
+/// K'(u) in `f32` for the per-sample path.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct FastGain {
+    poly: [f32; 3],
+    lo_v: f32,
+    hi_v: f32,
+}
+
+impl FastGain {
+    /// Checks and converts `cfg`.
+    ///
+    /// ```
+    /// use model_core::gain::{FastGain, FastGainConfig};
+    /// let g = FastGain::new(&FastGainConfig::default()).unwrap();
+    /// assert_eq!(g.gain(0.0), 1.0);
+    /// assert!((g.gain(10.0) - 1.1).abs() < 1e-6);
+    /// assert!((g.gain(20.0) - 1.1).abs() < 1e-6); // held above the range
+    /// ```
+    pub fn new(cfg: &FastGainConfig) -> Result<Self, ConfigError> {
+        cfg.validate()?;
+        Ok(Self {
+            poly: cfg.poly.map(|c| c as f32),
+            lo_v: cfg.range_v.0 as f32,
+            hi_v: cfg.range_v.1 as f32,
+        })
+    }
+
+    /// K'(u). NaN gives NaN.
+    #[inline]
+    pub fn gain(&self, u_v: f32) -> f32 {
+        let x = u_v.max(self.lo_v).min(self.hi_v);
+        self.poly[0] + x * (self.poly[1] + x * self.poly[2])
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn refuses_a_gain_that_would_fold_the_map() {
+        let c = FastGainConfig {
+            poly: [1.0, -0.5, 0.0],
+            ..FastGainConfig::default()
+        };
+        assert_eq!(FastGain::new(&c), Err(ConfigError::BadGain));
+        let c = FastGainConfig {
+            poly: [f64::NAN, 0.0, 0.0],
+            ..FastGainConfig::default()
+        };
+        assert_eq!(FastGain::new(&c), Err(ConfigError::NotFinite));
+    }
+}
