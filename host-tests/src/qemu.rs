@@ -736,7 +736,11 @@ impl Bench {
 pub fn bench_description(name: &str) -> &'static str {
     match name {
         "controller_step" => {
-            "`Controller::step`, closed loop: ADC code to DAC code (the ISR's maths)"
+            "`Controller::step`, closed loop, on-board generator + pre-filter: ADC code to DAC code (the ISR's maths)"
+        }
+        "controller_step_hysteresis_ff" => "the same with hysteresis feedforward on",
+        "controller_step_external_no_prefilter" => {
+            "`Controller::step`, external reference, pre-filter off"
         }
         "controller_step_faulted" => "`Controller::step` with a latched fault (safe ramp)",
         "lag_update" => "`LagCompensator::update_flags` (with its limits)",
@@ -747,6 +751,7 @@ pub fn bench_description(name: &str) -> &'static str {
         "prefilter_step" => "`PreFilter::step` (full pre-filter, default tau)",
         "reference_sine" => "`ReferenceGenerator::next`, sine",
         "reference_triangle" => "`ReferenceGenerator::next`, triangle",
+        "stage_step" => "`Stage::step`, ch. 6 model (simulation only, not in the ISR)",
         "hysteresis_forward" => "`HysteresisTable::forward`",
         "hysteresis_inverse" => "`HysteresisTable::inverse` (feedforward)",
         _ => "",

@@ -170,6 +170,9 @@ pub const SCENARIO_TRIANGLE_PEAK_FACTOR: f64 = 1.5;
 /// The pre-filter must cut the triangle's RMS error below the feedback-only velocity error
 /// divided by this (issue #3: a tenfold cut at 100 Hz).
 pub const SCENARIO_PREFILTER_CUT: f64 = 10.0;
+/// Bound on the RMS tracking error on the ch. 6 stage, as a fraction of the triangle's span
+/// (the lead's criterion in host-tests `controller.rs`: within 2 %, feedforward on or off).
+pub const SCENARIO_FULL_STAGE_RMS_FRAC: f64 = 0.02;
 /// When faults are injected, seconds.
 pub const SCENARIO_FAULT_AT_S: f64 = 0.2;
 /// When the reference moves in the stuck-sensor scenario, seconds (50 ms after the sensor

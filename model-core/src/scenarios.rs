@@ -20,12 +20,14 @@
 //! the stage for one period.
 //!
 //! # The stage
-//! [`StageModel`] is what the loop drives: today the linear plant of eq. 4.4
-//! ([`LinearStage`]); the non-linear stage of ch. 6 implements the same two methods.
+//! [`StageModel`] is what the loop drives: the linear plant of eq. 4.4 ([`LinearStage`]), or
+//! the ch. 6 overall model ([`FullStage`]: hysteresis, drift, K'(u), amplifier, converters and
+//! its own seeded Gaussian sensor noise) for the hysteresis scenarios.
 //!
 //! # Scenarios ([`Scenario`])
 //! 0.5 s each at 50 kHz ([`SAMPLES`]): a 0 -> 5 V step, a 100 Hz triangle from the on-board
-//! reference generator through the pre-filter (and, for comparison, without), and four injected
+//! reference generator through the pre-filter (and, for comparison, without), the same on the
+//! ch. 6 stage with the hysteresis feedforward on and off, and four injected
 //! faults on a 5 V set-point (sensor saturates, sensor sticks, NaN reference, absurd gain
 //! commands). [`Figures::check`] states what each must show: the command never leaves the
 //! window nor exceeds the slew limit, faults latch within their detection time and the
@@ -44,6 +46,7 @@ use crate::plant::{LinearPlant, LinearPlantConfig, PlantState};
 use crate::prefilter::{PreFilterConfig, PreFilterMode};
 use crate::reference::{ReferenceConfig, Shape};
 use crate::sections::Accumulator;
+use crate::stage::{Stage, StageConfig, StageState};
 
 /// Samples per scenario: [`params::SCENARIO_DURATION_S`] at [`params::SAMPLE_RATE_HZ`].
 pub const SAMPLES: u32 = (params::SCENARIO_DURATION_S * params::SAMPLE_RATE_HZ) as u32;
@@ -73,6 +76,12 @@ pub enum Scenario {
     Triangle,
     /// The same triangle with the pre-filter off: feedback alone.
     TriangleFeedbackOnly,
+    /// The triangle (generator, pre-filter) on the ch. 6 stage ([`FullStage`]: hysteresis
+    /// table, drift, K'(u), amplifier, converters, noise) with the controller's hysteresis
+    /// feedforward on.
+    HysteresisFeedforward,
+    /// The same on the ch. 6 stage with the feedforward off.
+    HysteresisFeedbackOnly,
     /// 5 V set-point; from [`FAULT_AT`] the sensor reads the ADC's top code.
     SensorSaturates,
     /// 5 V set-point; from [`FAULT_AT`] the ADC code freezes; at [`MOVE_AT`] the reference
@@ -87,10 +96,12 @@ pub enum Scenario {
 
 impl Scenario {
     /// Every scenario.
-    pub const ALL: [Self; 7] = [
+    pub const ALL: [Self; 9] = [
         Self::Step,
         Self::Triangle,
         Self::TriangleFeedbackOnly,
+        Self::HysteresisFeedforward,
+        Self::HysteresisFeedbackOnly,
         Self::SensorSaturates,
         Self::SensorSticks,
         Self::NanReference,
@@ -103,6 +114,8 @@ impl Scenario {
             Self::Step => "step",
             Self::Triangle => "triangle",
             Self::TriangleFeedbackOnly => "triangle-feedback-only",
+            Self::HysteresisFeedforward => "hysteresis-feedforward",
+            Self::HysteresisFeedbackOnly => "hysteresis-feedback-only",
             Self::SensorSaturates => "sensor-saturates",
             Self::SensorSticks => "sensor-sticks",
             Self::NanReference => "nan-reference",
@@ -121,9 +134,10 @@ impl Scenario {
         let hold = params::SCENARIO_STEP_V as f32;
         match self {
             Self::Step | Self::AbsurdGain | Self::SensorSaturates => step_reference(n),
-            Self::Triangle | Self::TriangleFeedbackOnly => {
-                params::SCENARIO_TRIANGLE_OFFSET_V as f32
-            }
+            Self::Triangle
+            | Self::TriangleFeedbackOnly
+            | Self::HysteresisFeedforward
+            | Self::HysteresisFeedbackOnly => params::SCENARIO_TRIANGLE_OFFSET_V as f32,
             Self::SensorSticks if n >= MOVE_AT => params::SCENARIO_MOVE_TO_V as f32,
             Self::SensorSticks => step_reference(n),
             Self::NanReference if n >= FAULT_AT => f32::NAN,
@@ -143,9 +157,15 @@ impl Scenario {
             ..base.reference
         };
         match self {
-            Self::Triangle => ControllerConfig {
+            Self::Triangle | Self::HysteresisFeedbackOnly => ControllerConfig {
                 reference: triangle,
                 source: ReferenceSource::Generator,
+                ..base
+            },
+            Self::HysteresisFeedforward => ControllerConfig {
+                reference: triangle,
+                source: ReferenceSource::Generator,
+                hysteresis_ff: true,
                 ..base
             },
             Self::TriangleFeedbackOnly => ControllerConfig {
@@ -161,13 +181,26 @@ impl Scenario {
         }
     }
 
+    /// True for the scenarios run on the ch. 6 stage ([`FullStage`]) instead of eq. 4.4.
+    pub const fn on_full_stage(self) -> bool {
+        matches!(
+            self,
+            Self::HysteresisFeedforward | Self::HysteresisFeedbackOnly
+        )
+    }
+
     /// The fault this scenario must latch, if any.
     pub const fn expected_fault(self) -> Option<Faults> {
         match self {
             Self::SensorSaturates => Some(Faults::SENSOR_RANGE),
             Self::SensorSticks => Some(Faults::SENSOR_STUCK),
             Self::NanReference => Some(Faults::NONFINITE),
-            Self::Step | Self::Triangle | Self::TriangleFeedbackOnly | Self::AbsurdGain => None,
+            Self::Step
+            | Self::Triangle
+            | Self::TriangleFeedbackOnly
+            | Self::HysteresisFeedforward
+            | Self::HysteresisFeedbackOnly
+            | Self::AbsurdGain => None,
         }
     }
 }
@@ -226,6 +259,42 @@ impl StageModel for LinearStage {
     #[inline]
     fn step(&mut self, u_v: f32) {
         self.plant.step(&mut self.state, u_v);
+    }
+}
+
+/// The ch. 6 stage with its state: the sensor (noise, ADC) is the stage's own.
+#[derive(Clone, Debug)]
+pub struct FullStage {
+    /// Configuration.
+    pub stage: Stage,
+    /// State.
+    pub state: StageState,
+}
+
+impl FullStage {
+    /// The thesis' overall model (`StageConfig::thesis_full`) at rest at 0 V.
+    pub fn thesis() -> Result<Self, ConfigError> {
+        let stage = Stage::new(&StageConfig::thesis_full())?;
+        Ok(Self {
+            state: stage.steady_state(0.0),
+            stage,
+        })
+    }
+}
+
+impl StageModel for FullStage {
+    #[inline]
+    fn output_v(&self) -> f32 {
+        self.state.signals().position_v
+    }
+    /// The stage's own sensor reading (the scenario's noise is not used).
+    #[inline]
+    fn measured_v(&self, _noise: f32) -> f32 {
+        self.state.signals().measured_v
+    }
+    #[inline]
+    fn step(&mut self, u_v: f32) {
+        self.stage.step(&mut self.state, u_v);
     }
 }
 
@@ -349,7 +418,13 @@ impl Figures {
                 let tol = params::SCENARIO_TRACKING_TOL_V as f32;
                 let final_err = (self.final_output_v - params::SCENARIO_STEP_V as f32).abs();
                 let velocity_err = params::SCENARIO_TRIANGLE_VELOCITY_ERR_V as f32;
-                if scenario == Scenario::Triangle {
+                let span = 2.0 * params::SCENARIO_TRIANGLE_AMPLITUDE_V as f32;
+                if scenario.on_full_stage() {
+                    let bound = params::SCENARIO_FULL_STAGE_RMS_FRAC as f32 * span;
+                    if !within(self.mean_sq_err_v2, bound * bound) {
+                        return Err("the ch. 6 stage's RMS tracking error exceeded its bound");
+                    }
+                } else if scenario == Scenario::Triangle {
                     let bound = velocity_err / params::SCENARIO_PREFILTER_CUT as f32;
                     if !within(self.mean_sq_err_v2, bound * bound) {
                         return Err("the pre-filtered triangle's RMS error exceeded its bound");
@@ -422,11 +497,15 @@ pub fn scenario_controller(scenario: Scenario) -> Result<Controller, ConfigError
     Controller::new(&scenario.config())
 }
 
-/// Run `scenario` with the thesis controller on the linear plant of eq. 4.4.
+/// Run `scenario` with its controller ([`Scenario::config`]) on the linear plant of eq. 4.4,
+/// or on the ch. 6 stage ([`Scenario::on_full_stage`]).
 pub fn run(scenario: Scenario) -> Result<(Controller, Figures), ConfigError> {
     let controller = scenario_controller(scenario)?;
-    let mut stage = LinearStage::thesis()?;
-    let figures = run_with(scenario, &controller, &mut stage);
+    let figures = if scenario.on_full_stage() {
+        run_with(scenario, &controller, &mut FullStage::thesis()?)
+    } else {
+        run_with(scenario, &controller, &mut LinearStage::thesis()?)
+    };
     Ok((controller, figures))
 }
 

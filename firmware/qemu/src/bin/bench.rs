@@ -35,6 +35,7 @@ mod image {
     use model_core::prefilter::{PreFilter, PreFilterConfig, PreFilterState};
     use model_core::reference::{ReferenceConfig, ReferenceGenerator, ReferenceState, Shape};
     use model_core::scenarios::{LinearStage, Scenario, StageModel, scenario_controller};
+    use model_core::stage::{Stage, StageConfig, StageState};
     use piezo_qemu::{EXIT_FAIL, EXIT_PASS, InstructionCounter, StackProbe, cpu_part, exit};
 
     /// Calls per timed loop.
@@ -91,6 +92,11 @@ mod image {
     #[inline(never)]
     fn reference_next(g: &ReferenceGenerator, s: &mut ReferenceState) -> f32 {
         g.next(s)
+    }
+
+    #[inline(never)]
+    fn stage_step(st: &Stage, s: &mut StageState, u: f32) -> f32 {
+        st.step(s, u)
     }
 
     #[inline(never)]
@@ -312,6 +318,15 @@ mod image {
             });
             report(name, ticks);
         }
+
+        let Ok(full) = Stage::new(&StageConfig::thesis_full()) else {
+            exit(EXIT_FAIL)
+        };
+        let mut ss = full.steady_state(rec.command_v[0]);
+        let ticks = time(&counter, |i| {
+            black_box(stage_step(&full, &mut ss, black_box(rec.command_v[i])));
+        });
+        report("stage_step", ticks);
 
         let table = HysteresisTable::thesis_default();
         let mut mem = HysteresisMemory::new();
