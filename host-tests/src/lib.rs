@@ -12,6 +12,7 @@ pub mod model_file;
 pub mod qemu;
 pub mod qemu_vectors;
 pub mod record;
+pub mod record_cmd;
 pub mod reference;
 pub mod sim;
 pub mod simulate;

@@ -27,6 +27,7 @@
 //! * [`reference`](mod@reference): reference generators (step, ramp, sine, triangle, square, sweep) with preview.
 //! * [`drift`], [`gain`], [`amplifier`], [`sensor`]: the non-linear blocks of ch. 5.
 //! * [`stage`]: the ch. 6 overall model composed of all blocks (the wiring is stated there).
+//! * [`frame`]: the capture wire format (firmware encoder, host decoder).
 //!
 //! Each block keeps its configuration (coefficients, `Copy`) apart from its state, so a new
 //! configuration can be computed outside the interrupt and swapped in whole.
@@ -39,6 +40,7 @@ pub mod codes;
 pub mod controller;
 pub mod discretize;
 pub mod drift;
+pub mod frame;
 pub mod gain;
 pub mod hysteresis;
 pub mod lag;

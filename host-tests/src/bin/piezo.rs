@@ -27,6 +27,8 @@ enum Command {
     Synth(host_tests::synth::SynthArgs),
     /// Identify drift or hysteresis from a record and write a model file.
     Identify(host_tests::identify_cmd::IdentifyArgs),
+    /// Capture a run on the board over its serial port and write it as CSV (t,u,y,r,flags).
+    Record(host_tests::record_cmd::RecordArgs),
 }
 
 fn main() -> std::process::ExitCode {
@@ -38,6 +40,7 @@ fn main() -> std::process::ExitCode {
         Command::Simulate(a) => host_tests::simulate::run(&a),
         Command::Synth(a) => host_tests::synth::run(&a),
         Command::Identify(a) => host_tests::identify_cmd::run(&a),
+        Command::Record(a) => host_tests::record_cmd::run(&a),
     };
     match result {
         Ok(()) => std::process::ExitCode::SUCCESS,
