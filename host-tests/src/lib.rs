@@ -9,6 +9,8 @@ pub mod identify;
 pub mod identify_cmd;
 pub mod loop_cmd;
 pub mod model_file;
+pub mod qemu;
+pub mod qemu_vectors;
 pub mod record;
 pub mod record_cmd;
 pub mod reference;

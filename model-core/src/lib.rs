@@ -49,6 +49,7 @@ pub mod params;
 pub mod plant;
 pub mod prefilter;
 pub mod reference;
+pub mod scenarios;
 pub mod sections;
 pub mod sensor;
 pub mod stage;

@@ -17,6 +17,8 @@ struct Cli {
 enum Command {
     /// Closed-loop figures of the thesis loop (margins, bandwidth, step response).
     Loop(host_tests::loop_cmd::LoopArgs),
+    /// The control code on Cortex-M4F/M7 under QEMU: scenarios, on-target tests, budget.
+    Qemu(host_tests::qemu::QemuArgs),
     /// Tracking error of a periodic reference with and without the pre-filter.
     Track(host_tests::track::TrackArgs),
     /// Open-loop response of a model to a recorded input (writes t,u,y).
@@ -33,6 +35,7 @@ fn main() -> std::process::ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Loop(a) => host_tests::loop_cmd::run(&a),
+        Command::Qemu(a) => host_tests::qemu::run(&a),
         Command::Track(a) => host_tests::track::run(&a),
         Command::Simulate(a) => host_tests::simulate::run(&a),
         Command::Synth(a) => host_tests::synth::run(&a),
