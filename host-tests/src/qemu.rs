@@ -248,7 +248,8 @@ pub fn target_dir() -> PathBuf {
 
 fn cargo() -> Command {
     let mut c = Command::new(std::env::var_os("CARGO").unwrap_or_else(|| "cargo".into()));
-    c.current_dir(workspace_root())
+    // From the QEMU workspace's own directory, so the linker picks up its memory.x.
+    c.current_dir(workspace_root().join("firmware").join("qemu"))
         .env_remove("CARGO_TARGET_DIR")
         .env_remove("CARGO_BUILD_TARGET")
         .env_remove("RUSTFLAGS")
