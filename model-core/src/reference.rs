@@ -290,7 +290,14 @@ impl ReferenceGenerator {
                 return if c.n >= self.ramp_len {
                     self.offset + self.amplitude
                 } else {
-                    self.offset + self.ramp_per_sample * c.n as f32
+                    // n < ramp_len; through u32 (one instruction) rather than u64 -> f32
+                    // (software); a ramp longer than 2^32 samples (24 h at 50 kHz) saturates.
+                    let n = if c.n > u32::MAX as u64 {
+                        u32::MAX
+                    } else {
+                        c.n as u32
+                    };
+                    self.offset + self.ramp_per_sample * n as f32
                 };
             }
         };
@@ -327,7 +334,9 @@ pub fn fold(phase: u32) -> f32 {
     } else {
         p
     };
-    f as f32 * (1.0 / Q as f32)
+    // |f| <= 2^30 fits i32, whose conversion is one instruction; i64 -> f32 is a software
+    // routine on thumbv7em.
+    f as i32 as f32 * (1.0 / Q as f32)
 }
 
 /// Taylor coefficients of `sin(pi x / 2)`, odd powers 1..=13.
