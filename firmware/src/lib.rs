@@ -1,2 +1,16 @@
-//! Firmware logic that does not touch registers: testable on the host.
-#![no_std]
+//! The firmware's logic that touches no register, unit-tested on the host
+//! (`cargo test -p firmware --lib`): the command language, the capture buffer protocol,
+//! the configuration hand-over to the interrupt, the interrupt's timing statistics, the
+//! watchdog liveness rule and the converter/timer arithmetic. The board code (`src/hw/`,
+//! built for thumbv7em-none-eabihf only) calls these.
+#![cfg_attr(not(test), no_std)]
+#![warn(missing_docs)]
+
+pub mod capture;
+pub mod command;
+pub mod liveness;
+pub mod mailbox;
+pub mod sample;
+pub mod scaling;
+pub mod settings;
+pub mod stats;

@@ -1,25 +1,10 @@
-//! The board image. On the host this binary is an empty stub so that workspace-wide
-//! `cargo clippy` works; the real image is built for thumbv7em-none-eabihf.
+//! The board image: the 50 kHz piezo loop on a NUCLEO-H743ZI2 (see `firmware/README.md`).
+//! On the host this binary is an empty stub so that workspace-wide `cargo clippy` works; the
+//! real image is built for thumbv7em-none-eabihf and its register code lives in `hw/`.
 #![cfg_attr(target_os = "none", no_std, no_main)]
 
 #[cfg(target_os = "none")]
-mod board {
-    use cortex_m_rt::entry;
-
-    #[entry]
-    fn main() -> ! {
-        loop {
-            cortex_m::asm::wfi();
-        }
-    }
-
-    #[panic_handler]
-    fn panic(_: &core::panic::PanicInfo) -> ! {
-        loop {
-            cortex_m::asm::udf();
-        }
-    }
-}
+mod hw;
 
 #[cfg(not(target_os = "none"))]
 fn main() {

@@ -4,7 +4,7 @@
 //! noise), runs the workflow from `thesis-linear`, prints the table and writes the report.
 
 use crate::gap::{Data, Options, diagnose, protocol, report};
-use crate::model_file::{DriftSection, HysteresisSection, ModelFile};
+use crate::model_file::{DriftSection, ModelFile, PlaySection};
 use crate::record::Record;
 use crate::simulate::simulate;
 use clap::Args;
@@ -38,7 +38,7 @@ pub fn demo_truth(seed: u64) -> ModelFile {
         poly: [1.0, 0.0, 0.0, 0.0],
         poly_range_v: [0.0, 10.0],
     });
-    m.hysteresis = Some(HysteresisSection {
+    m.hysteresis_play = Some(PlaySection {
         radii_v: params::PLAY_RADII_V,
         weights: [0.03, 0.04, 0.03, 0.015],
     });

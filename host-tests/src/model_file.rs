@@ -46,28 +46,32 @@
 //! poly = [1.0, 0.02, -0.001]
 //! range_v = [0.0, 10.0]
 //!
-//! [hysteresis]                   # effect `hysteresis`: play operators (model_core::play)
-//! radii_v = [0.2, 0.6, 1.5, 3.5]
-//! weights = [0.02, 0.02, 0.03, 0.02]
-//!
 //! [slew-rate-limit]               # effect `slew-rate-limit`, at the amplifier output
 //! output_v_per_s = 1.5e6
 //!
 //! [saturation]                    # effect `saturation`: amplifier ranges
 //! input_range_v = [-2.0, 12.0]
 //! output_range_v = [-20.0, 120.0]
+//!
+//! [hysteresis]                    # effect `hysteresis`: the Everett table
+//! input_range_v = [0.0, 10.0]
+//! offset_v = 0.0
+//! everett_v = [0.0175, 0.0359, ...]  # 990 values: the grid, packed lower triangle
+//! # or, instead of everett_v, the parametric congruent-loop form:
+//! # dc_gain = 0.79
+//! # loop_width_frac = 0.185
 //! ```
 //! The built-in names are `thesis-linear` (eq. 4.4 alone: plant, `time-delay`,
 //! `amplifier-pole`; no converters, no noise) and `thesis-full` (the ch. 6 overall model: all of
-//! the above but `resonance`, with converters and the thesis' 2.5 mV noise). Wherever a model
+//! the above but `resonance`, with the default hysteresis table stored as its grid, converters and the thesis' 2.5 mV noise). Wherever a model
 //! is asked for, a path or a built-in name is accepted ([`ModelFile::load`]).
 
 use anyhow::{Context, bail};
 use model_core::amplifier::AmplifierConfig;
 use model_core::drift::DriftConfig;
 use model_core::gain::FastGainConfig;
+use model_core::hysteresis::HysteresisTable;
 use model_core::params;
-use model_core::play::PlayConfig;
 use model_core::sensor::SensorConfig;
 use model_core::stage::{ModeConfig, Stage, StageConfig};
 use serde::{Deserialize, Serialize};
@@ -163,21 +167,80 @@ pub struct GainSection {
 }
 
 /// `[slew-rate-limit]`.
-/// Effect `hysteresis`: the play-operator sum of [`model_core::play`].
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct HysteresisSection {
-    /// Thresholds, volts.
-    pub radii_v: [f64; params::PLAY_OPERATORS],
-    /// Weights, sensor volts per volt.
-    pub weights: [f64; params::PLAY_OPERATORS],
-}
-
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct SlewSection {
     /// Slew limit at the amplifier output, V/s.
     pub output_v_per_s: f64,
+}
+
+/// `[hysteresis]`: the Everett table of [`model_core::hysteresis`], either as its grid
+/// (`everett_v`, the packed lower triangle, [`model_core::hysteresis::TABLE_LEN`] values) or in
+/// the parametric congruent-loop form (`dc_gain` and `loop_width_frac`, see
+/// [`HysteresisTable::quadratic_everett`]); exactly one of the two.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct HysteresisSection {
+    /// Input range of the table, volts at the amplifier input.
+    pub input_range_v: [f64; 2],
+    /// Output at the bottom of the range, sensor volts.
+    pub offset_v: f64,
+    /// Parametric form: average gain over the major loop.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub dc_gain: Option<f64>,
+    /// Parametric form: largest loop width as a fraction of the output span.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub loop_width_frac: Option<f64>,
+    /// Grid form: the packed Everett values, sensor volts.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub everett_v: Option<Vec<f32>>,
+}
+
+impl HysteresisSection {
+    /// The grid form of `t`.
+    pub fn from_table(t: &HysteresisTable) -> Self {
+        let (lo, hi) = t.input_range_v();
+        Self {
+            input_range_v: [lo as f64, hi as f64],
+            offset_v: t.offset_v() as f64,
+            dc_gain: None,
+            loop_width_frac: None,
+            everett_v: Some(t.everett_grid_v().to_vec()),
+        }
+    }
+
+    /// The table, or an error naming the problem.
+    pub fn table(&self) -> anyhow::Result<HysteresisTable> {
+        let [lo, hi] = self.input_range_v;
+        let r = match (&self.everett_v, self.dc_gain, self.loop_width_frac) {
+            (Some(e), None, None) => {
+                HysteresisTable::from_grid(lo as f32, hi as f32, self.offset_v as f32, e)
+            }
+            (None, Some(g), Some(w)) => {
+                HysteresisTable::quadratic_everett(lo, hi, self.offset_v, g, w)
+            }
+            _ => bail!(
+                "[hysteresis] needs either `everett_v` (the grid) or both `dc_gain` and `loop_width_frac`"
+            ),
+        };
+        r.map_err(|e| {
+            anyhow::anyhow!(
+                "[hysteresis]: {e} (grid of {} values, non-negative, rising in alpha and falling in beta; range inside -2..12 V)",
+                model_core::hysteresis::TABLE_LEN
+            )
+        })
+    }
+}
+
+/// `[hysteresis-play]`: the play-operator hysteresis the model-gap workflow fits
+/// ([`model_core::play`]), added to the fast map beside (or instead of) the table.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PlaySection {
+    /// Thresholds, volts.
+    pub radii_v: [f64; model_core::params::PLAY_OPERATORS],
+    /// Weights, sensor volts per volt.
+    pub weights: [f64; model_core::params::PLAY_OPERATORS],
 }
 
 /// `[saturation]`.
@@ -206,10 +269,18 @@ pub struct ModelFile {
     /// Converters and sensor.
     pub converters: ConvertersSection,
     /// `time-delay`.
-    #[serde(rename = "time-delay", default, skip_serializing_if = "Option::is_none")]
+    #[serde(
+        rename = "time-delay",
+        default,
+        skip_serializing_if = "Option::is_none"
+    )]
     pub time_delay: Option<DelaySection>,
     /// `amplifier-pole`.
-    #[serde(rename = "amplifier-pole", default, skip_serializing_if = "Option::is_none")]
+    #[serde(
+        rename = "amplifier-pole",
+        default,
+        skip_serializing_if = "Option::is_none"
+    )]
     pub amplifier_pole: Option<PoleSection>,
     /// `resonance`.
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -218,24 +289,42 @@ pub struct ModelFile {
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub drift: Option<DriftSection>,
     /// `nonlinear-gain`.
-    #[serde(rename = "nonlinear-gain", default, skip_serializing_if = "Option::is_none")]
+    #[serde(
+        rename = "nonlinear-gain",
+        default,
+        skip_serializing_if = "Option::is_none"
+    )]
     pub nonlinear_gain: Option<GainSection>,
     /// `slew-rate-limit`.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub hysteresis: Option<HysteresisSection>,
-    #[serde(rename = "slew-rate-limit", default, skip_serializing_if = "Option::is_none")]
+    #[serde(
+        rename = "slew-rate-limit",
+        default,
+        skip_serializing_if = "Option::is_none"
+    )]
     pub slew_rate_limit: Option<SlewSection>,
     /// `saturation`.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub saturation: Option<SaturationSection>,
+    /// `hysteresis` (last: its grid is long).
+    /// `hysteresis` in the fitted play form.
+    #[serde(rename = "hysteresis-play", default, skip_serializing_if = "Option::is_none")]
+    pub hysteresis_play: Option<PlaySection>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub hysteresis: Option<HysteresisSection>,
 }
 
 impl ModelFile {
     /// A built-in model by name.
     pub fn built_in(name: &str) -> Option<Self> {
         match name {
-            "thesis-linear" => Some(Self::from_stage_config("thesis-linear", &StageConfig::thesis_linear())),
-            "thesis-full" => Some(Self::from_stage_config("thesis-full", &StageConfig::thesis_full())),
+            "thesis-linear" => Some(Self::from_stage_config(
+                "thesis-linear",
+                &StageConfig::thesis_linear(),
+            )),
+            "thesis-full" => Some(Self::from_stage_config(
+                "thesis-full",
+                &StageConfig::thesis_full(),
+            )),
             _ => None,
         }
     }
@@ -252,13 +341,15 @@ impl ModelFile {
                 BUILT_IN.join(", ")
             );
         }
-        let text = std::fs::read_to_string(path).with_context(|| format!("cannot read model file {}", path.display()))?;
+        let text = std::fs::read_to_string(path)
+            .with_context(|| format!("cannot read model file {}", path.display()))?;
         Self::parse(&text).with_context(|| format!("model file {}", path.display()))
     }
 
     /// Parse TOML text and check that it builds a stage.
     pub fn parse(text: &str) -> anyhow::Result<Self> {
-        let m: Self = toml::from_str(text).map_err(|e| anyhow::anyhow!("{}", e.to_string().trim_end()))?;
+        let m: Self =
+            toml::from_str(text).map_err(|e| anyhow::anyhow!("{}", e.to_string().trim_end()))?;
         m.build_stage()?;
         Ok(m)
     }
@@ -274,7 +365,8 @@ impl ModelFile {
 
     /// Write to `path`.
     pub fn write(&self, path: &Path) -> anyhow::Result<()> {
-        std::fs::write(path, self.to_toml()?).with_context(|| format!("cannot write {}", path.display()))
+        std::fs::write(path, self.to_toml()?)
+            .with_context(|| format!("cannot write {}", path.display()))
     }
 
     /// The model file describing `c`.
@@ -288,7 +380,9 @@ impl ModelFile {
                 mode_hz: c.mode.mode_hz,
                 damping: c.mode.damping,
             },
-            amplifier: AmplifierSection { gain: c.amplifier.gain },
+            amplifier: AmplifierSection {
+                gain: c.amplifier.gain,
+            },
             converters: ConvertersSection {
                 dac: c.dac,
                 adc: c.sensor.adc,
@@ -312,29 +406,50 @@ impl ModelFile {
                 poly: g.poly,
                 range_v: pair(g.range_v),
             }),
-            hysteresis: c.play.map(|p| HysteresisSection {
-                radii_v: p.radii_v,
-                weights: p.weights,
-            }),
-            slew_rate_limit: c.amplifier.slew_v_per_s.map(|s| SlewSection { output_v_per_s: s }),
+            slew_rate_limit: c
+                .amplifier
+                .slew_v_per_s
+                .map(|s| SlewSection { output_v_per_s: s }),
             saturation: c.amplifier.saturation.then_some(SaturationSection {
                 input_range_v: pair(c.amplifier.input_range_v),
                 output_range_v: pair(c.amplifier.output_range_v),
             }),
+            hysteresis: c.hysteresis.as_ref().map(HysteresisSection::from_table),
+            hysteresis_play: c.play.map(|p| PlaySection {
+                radii_v: p.radii_v,
+                weights: p.weights,
+            }),
         }
     }
 
-    /// The stage configuration this file describes (not yet checked: see [`Self::build_stage`]).
-    pub fn stage_config(&self) -> StageConfig {
+    /// The stage configuration this file describes; the hysteresis table is checked here, the
+    /// rest by [`Self::build_stage`].
+    pub fn stage_config(&self) -> anyhow::Result<StageConfig> {
+        let hysteresis = self
+            .hysteresis
+            .as_ref()
+            .map(HysteresisSection::table)
+            .transpose()?;
         let pair = |p: [f64; 2]| (p[0], p[1]);
         let sat = self.saturation.as_ref();
-        StageConfig {
+        Ok(StageConfig {
             period_s: self.period_s,
+            hysteresis,
+            play: self.hysteresis_play.as_ref().map(|h| model_core::play::PlayConfig {
+                radii_v: h.radii_v,
+                weights: h.weights,
+            }),
             dac: self.converters.dac,
             amplifier: AmplifierConfig {
                 gain: self.amplifier.gain,
-                input_range_v: sat.map_or((params::AMP_INPUT_MIN_V, params::AMP_INPUT_MAX_V), |s| pair(s.input_range_v)),
-                output_range_v: sat.map_or((params::AMP_OUTPUT_MIN_V, params::AMP_OUTPUT_MAX_V), |s| pair(s.output_range_v)),
+                input_range_v: sat
+                    .map_or((params::AMP_INPUT_MIN_V, params::AMP_INPUT_MAX_V), |s| {
+                        pair(s.input_range_v)
+                    }),
+                output_range_v: sat
+                    .map_or((params::AMP_OUTPUT_MIN_V, params::AMP_OUTPUT_MAX_V), |s| {
+                        pair(s.output_range_v)
+                    }),
                 slew_v_per_s: self.slew_rate_limit.as_ref().map(|s| s.output_v_per_s),
                 saturation: sat.is_some(),
             },
@@ -358,10 +473,6 @@ impl ModelFile {
                 mode_hz: r.mode_hz,
                 damping: r.damping,
             }),
-            play: self.hysteresis.as_ref().map(|h| PlayConfig {
-                radii_v: h.radii_v,
-                weights: h.weights,
-            }),
             delay_s: self.time_delay.as_ref().map_or(0.0, |d| d.delay_s),
             sensor: SensorConfig {
                 gain: self.converters.sensor_gain,
@@ -369,11 +480,80 @@ impl ModelFile {
                 adc: self.converters.adc,
                 seed: self.converters.seed,
             },
-        }
+        })
     }
 
-    /// The model-core stage, or an error naming the refused parameter group.
+    /// Checks each table on its own, so that an error names the table and the rule.
+    pub fn check(&self) -> anyhow::Result<()> {
+        let c = self.stage_config()?;
+        let rate = 1.0 / c.period_s;
+        if !(c.period_s.is_finite()
+            && (params::MIN_SAMPLE_RATE_HZ..=params::MAX_SAMPLE_RATE_HZ * (1.0 + 1e-9))
+                .contains(&rate))
+        {
+            bail!(
+                "period_s = {} must give a rate within 10..200 kHz",
+                c.period_s
+            );
+        }
+        let nyquist = 0.5 * rate;
+        if !(c.static_gain.is_finite() && c.static_gain > 0.05 && c.static_gain < 20.0) {
+            bail!(
+                "[plant] static_gain = {} must be within 0.05..20",
+                c.static_gain
+            );
+        }
+        if !(c.mode.mode_hz > 0.0
+            && c.mode.mode_hz < nyquist
+            && c.mode.damping > 0.0
+            && c.mode.damping <= 10.0)
+        {
+            bail!("[plant] mode_hz must be within 0..{nyquist} Hz and damping within 0..10");
+        }
+        if !(c.delay_s >= 0.0 && c.delay_s <= params::MAX_DELAY_S) {
+            bail!(
+                "[time-delay] delay_s = {} must be within 0..{} s",
+                c.delay_s,
+                params::MAX_DELAY_S
+            );
+        }
+        if let Some(p) = c.amp_pole_hz
+            && !(p > 0.0 && p < 10.0 * nyquist)
+        {
+            bail!(
+                "[amplifier-pole] pole_hz = {p} must be within 0..{} Hz",
+                10.0 * nyquist
+            );
+        }
+        if let Some(m) = c.second_mode
+            && !(m.mode_hz > 0.0 && m.mode_hz < nyquist && m.damping > 0.0 && m.damping <= 10.0)
+        {
+            bail!("[resonance] mode_hz must be within 0..{nyquist} Hz and damping within 0..10");
+        }
+        if let Some(d) = c.drift {
+            d.validate().map_err(|e| {
+                anyhow::anyhow!(
+                    "[drift]: {e} (time constants 1 us..1e5 s, gains within +-1, K(u) u increasing)"
+                )
+            })?;
+        }
+        if let Some(g) = c.nonlinear_gain {
+            g.validate().map_err(|e| {
+                anyhow::anyhow!("[nonlinear-gain]: {e} (K' within 0.2..5, K'(u) u increasing)")
+            })?;
+        }
+        c.amplifier
+            .validate()
+            .map_err(|e| anyhow::anyhow!("[amplifier] / [slew-rate-limit] / [saturation]: {e} (gain 1..100, slew 15..1500 V/ms, ranges inside -2..12 V in and -20..120 V out)"))?;
+        model_core::sensor::Sensor::new(&c.sensor).map_err(|e| {
+            anyhow::anyhow!("[converters]: {e} (sensor_gain 0.1..10, noise_v 0..1 V)")
+        })?;
+        Ok(())
+    }
+
+    /// The model-core stage, or an error naming the refused table.
     pub fn build_stage(&self) -> anyhow::Result<Stage> {
-        Stage::new(&self.stage_config()).map_err(|e| anyhow::anyhow!("invalid model: {e}"))
+        self.check()?;
+        Stage::new(&self.stage_config()?).map_err(|e| anyhow::anyhow!("invalid model: {e}"))
     }
 }

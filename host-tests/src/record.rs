@@ -116,7 +116,9 @@ pub enum RecordError {
         prev: f64,
     },
     /// Non-uniform sampling.
-    #[error("line {line}: sampling interval {dt} s differs from the mean interval {mean} s (records must be uniformly sampled)")]
+    #[error(
+        "line {line}: sampling interval {dt} s differs from the mean interval {mean} s (records must be uniformly sampled)"
+    )]
     NonUniform {
         /// 1-based line.
         line: usize,
@@ -146,11 +148,20 @@ fn truncate(s: &str) -> String {
 
 impl Record {
     /// A record from columns; checks lengths, finiteness and uniform sampling.
-    pub fn new(t_s: Vec<f64>, u_v: Vec<f64>, y_v: Option<Vec<f64>>, r_v: Option<Vec<f64>>) -> Result<Self, RecordError> {
+    pub fn new(
+        t_s: Vec<f64>,
+        u_v: Vec<f64>,
+        y_v: Option<Vec<f64>>,
+        r_v: Option<Vec<f64>>,
+    ) -> Result<Self, RecordError> {
         let n = t_s.len();
         let check = |v: &[f64], column: &'static str| {
             if v.len() != n {
-                Err(RecordError::Mismatched { t: n, column, len: v.len() })
+                Err(RecordError::Mismatched {
+                    t: n,
+                    column,
+                    len: v.len(),
+                })
             } else if let Some(i) = v.iter().position(|x| !x.is_finite()) {
                 Err(RecordError::NotFinite {
                     line: i + 2,
@@ -197,7 +208,11 @@ impl Record {
         for i in 1..n {
             let dt = t[i] - t[i - 1];
             if (dt - mean).abs() > tol {
-                return Err(RecordError::NonUniform { line: line(i), dt, mean });
+                return Err(RecordError::NonUniform {
+                    line: line(i),
+                    dt,
+                    mean,
+                });
             }
         }
         Ok(())
@@ -218,10 +233,16 @@ impl Record {
             let fields: Vec<&str> = s.split(',').map(str::trim).collect();
             match &header {
                 None => {
-                    let names: Vec<String> = fields.iter().map(|f| f.trim_matches('"').to_string()).collect();
+                    let names: Vec<String> = fields
+                        .iter()
+                        .map(|f| f.trim_matches('"').to_string())
+                        .collect();
                     for (a, name) in names.iter().enumerate() {
                         if names[..a].contains(name) {
-                            return Err(RecordError::DuplicateColumn { line, column: name.clone() });
+                            return Err(RecordError::DuplicateColumn {
+                                line,
+                                column: name.clone(),
+                            });
                         }
                     }
                     let find = |c: &'static str| names.iter().position(|n| n == c);
@@ -286,7 +307,11 @@ impl Record {
         match std::str::from_utf8(bytes) {
             Ok(s) => Self::parse(s),
             Err(e) => {
-                let line = bytes[..e.valid_up_to()].iter().filter(|b| **b == b'\n').count() + 1;
+                let line = bytes[..e.valid_up_to()]
+                    .iter()
+                    .filter(|b| **b == b'\n')
+                    .count()
+                    + 1;
                 Err(RecordError::NotText { line })
             }
         }

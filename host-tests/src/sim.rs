@@ -7,7 +7,7 @@
 //! identification (sec. 4.1.1), so the simulation adds none of its own.
 
 use model_core::lag::{LagCompensator, LagConfig, LagState};
-use model_core::limits::ConfigError;
+use model_core::limits::{ConfigError, Flags};
 use model_core::plant::{LinearPlant, LinearPlantConfig, PlantState};
 use model_core::{AdcCode, DacCode};
 use rand::SeedableRng;
@@ -25,6 +25,8 @@ pub struct LoopSample {
     pub command_v: f64,
     /// The DAC code sent.
     pub dac: DacCode,
+    /// What the compensator's output limits did this sample.
+    pub flags: Flags,
 }
 
 /// A closed loop of model-core blocks.
@@ -83,9 +85,9 @@ impl LoopSim {
         } else {
             output + noise
         };
-        let u = self
+        let (u, flags) = self
             .lag
-            .update(&mut self.lag_state, (r_v - measured) as f32);
+            .update_flags(&mut self.lag_state, (r_v - measured) as f32);
         let dac = DacCode::from_volts(u);
         let applied = if self.quantise { dac.volts() } else { u };
         self.plant.step(&mut self.plant_state, applied);
@@ -94,6 +96,7 @@ impl LoopSim {
             output_v: output,
             command_v: applied as f64,
             dac,
+            flags,
         }
     }
 }

@@ -65,7 +65,8 @@ pub fn run(a: &SimulateArgs) -> anyhow::Result<()> {
         model.converters.noise_v = 0.0;
     }
     let stage = model.build_stage()?;
-    let rec = Record::read(&a.input).with_context(|| format!("input record {}", a.input.display()))?;
+    let rec =
+        Record::read(&a.input).with_context(|| format!("input record {}", a.input.display()))?;
     let y = simulate(&stage, model.period_s, &rec.t_s, &rec.u_v);
     let out = Record::new(rec.t_s, rec.u_v, Some(y), None)?;
     out.write(&a.output)?;

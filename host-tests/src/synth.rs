@@ -14,8 +14,11 @@
 //! * `sine`: `offset + amplitude (1 - cos(2 pi freq t)) / 2` (starts at rest).
 //! * `chirp`: the same with the frequency swept linearly from `--freq` to `--freq-end`.
 //! * `forc`: first-order reversal curves as the thesis recorded them (sec. 5.3.4), from the
-//!   hysteresis identification's protocol generator.
+//!   hysteresis identification's generator [`forc_protocol`]: preconditioning sine at `--freq`
+//!   (1 Hz in the thesis), turning values every 0.15 V over `offset..offset + amplitude`,
+//!   10 V/s ramps; the record is as long as the protocol needs (`--seconds` is ignored).
 
+use crate::identify::hysteresis::{ForcProtocol, forc_protocol};
 use crate::model_file::ModelFile;
 use crate::record::Record;
 use crate::simulate::simulate;
@@ -64,7 +67,7 @@ pub struct SynthArgs {
     /// Record sampling rate, Hz.
     #[arg(long, default_value_t = 50_000.0)]
     pub rate: f64,
-    /// Span of the input above the offset, volts.
+    /// Span of the input above the offset, volts (forc: use 10 for the 0..10 V table).
     #[arg(long, default_value_t = 6.0)]
     pub amplitude: f64,
     /// Lowest input, volts.
@@ -86,24 +89,48 @@ pub struct SynthArgs {
 
 impl SynthArgs {
     fn check(&self) -> anyhow::Result<()> {
-        ensure!(self.seconds.is_finite() && self.seconds > 0.0 && self.seconds <= 3600.0, "--seconds must be within (0, 3600]");
-        ensure!(self.rate.is_finite() && (10.0..=1e6).contains(&self.rate), "--rate must be within 10 Hz..1 MHz");
-        ensure!(self.seconds * self.rate <= 5e7, "record too long: at most 5e7 samples");
-        ensure!(self.seconds * self.rate >= 2.0, "record too short: fewer than 2 samples");
-        ensure!(self.amplitude.is_finite() && self.offset.is_finite(), "--amplitude and --offset must be finite");
+        ensure!(
+            self.seconds.is_finite() && self.seconds > 0.0 && self.seconds <= 3600.0,
+            "--seconds must be within (0, 3600]"
+        );
+        ensure!(
+            self.rate.is_finite() && (10.0..=1e6).contains(&self.rate),
+            "--rate must be within 10 Hz..1 MHz"
+        );
+        ensure!(
+            self.seconds * self.rate <= 5e7,
+            "record too long: at most 5e7 samples"
+        );
+        ensure!(
+            self.seconds * self.rate >= 2.0,
+            "record too short: fewer than 2 samples"
+        );
+        ensure!(
+            self.amplitude.is_finite() && self.offset.is_finite(),
+            "--amplitude and --offset must be finite"
+        );
         ensure!(
             self.offset >= -2.0 && self.offset + self.amplitude <= 12.0 && self.amplitude >= 0.0,
             "the input must stay within the amplifier's -2..12 V: offset {} + amplitude {}",
             self.offset,
             self.amplitude
         );
-        ensure!(self.freq.is_finite() && self.freq > 0.0 && self.freq < self.rate / 2.0, "--freq must be within (0, rate/2)");
-        ensure!(self.freq_end.is_finite() && self.freq_end > 0.0 && self.freq_end < self.rate / 2.0, "--freq-end must be within (0, rate/2)");
+        ensure!(
+            self.freq.is_finite() && self.freq > 0.0 && self.freq < self.rate / 2.0,
+            "--freq must be within (0, rate/2)"
+        );
+        ensure!(
+            self.freq_end.is_finite() && self.freq_end > 0.0 && self.freq_end < self.rate / 2.0,
+            "--freq-end must be within (0, rate/2)"
+        );
         if let Some(h) = self.hold {
             ensure!(h.is_finite() && h > 0.0, "--hold must be positive");
         }
         if let Some(n) = self.noise_v {
-            ensure!(n.is_finite() && (0.0..=1.0).contains(&n), "--noise-v must be within 0..1 V");
+            ensure!(
+                n.is_finite() && (0.0..=1.0).contains(&n),
+                "--noise-v must be within 0..1 V"
+            );
         }
         Ok(())
     }
@@ -139,7 +166,10 @@ pub fn input(a: &SynthArgs, t_s: &[f64]) -> anyhow::Result<Vec<f64>> {
                 o + amp * if p < 0.5 { 2.0 * p } else { 2.0 - 2.0 * p }
             })
             .collect(),
-        Protocol::Sine => t_s.iter().map(|&t| o + amp * 0.5 * (1.0 - (2.0 * PI * f * t).cos())).collect(),
+        Protocol::Sine => t_s
+            .iter()
+            .map(|&t| o + amp * 0.5 * (1.0 - (2.0 * PI * f * t).cos()))
+            .collect(),
         Protocol::Chirp => {
             let k = (a.freq_end - f) / a.seconds;
             t_s.iter()
@@ -147,7 +177,7 @@ pub fn input(a: &SynthArgs, t_s: &[f64]) -> anyhow::Result<Vec<f64>> {
                 .collect()
         }
         Protocol::Identification => bail!("the identification protocol writes two records (see crate::gap::protocol)"),
-        Protocol::Forc => bail!("the forc protocol needs the hysteresis identification, which is not merged yet"),
+        Protocol::Forc => bail!("the forc protocol defines its own sample times"),
     })
 }
 
@@ -160,9 +190,24 @@ pub fn synth(a: &SynthArgs) -> anyhow::Result<Record> {
         model.converters.noise_v = n;
     }
     let stage = model.build_stage()?;
-    let n = (a.seconds * a.rate).round() as usize;
-    let t_s: Vec<f64> = (0..n).map(|i| i as f64 / a.rate).collect();
-    let u_v = input(a, &t_s)?;
+    let (t_s, u_v) = if a.protocol == Protocol::Forc {
+        let p = ForcProtocol {
+            rate_hz: a.rate,
+            u_min_v: a.offset,
+            u_max_v: a.offset + a.amplitude,
+            precondition_hz: a.freq,
+            ..ForcProtocol::default()
+        };
+        let u = forc_protocol(&p)?;
+        ensure!(u.len() >= 2, "the FORC protocol gave fewer than 2 samples");
+        let t: Vec<f64> = (0..u.len()).map(|i| i as f64 / a.rate).collect();
+        (t, u)
+    } else {
+        let n = (a.seconds * a.rate).round() as usize;
+        let t_s: Vec<f64> = (0..n).map(|i| i as f64 / a.rate).collect();
+        let u_v = input(a, &t_s)?;
+        (t_s, u_v)
+    };
     let y = simulate(&stage, model.period_s, &t_s, &u_v);
     Ok(Record::new(t_s, u_v, Some(y), None)?)
 }

@@ -448,7 +448,7 @@ fn bad_models_give_clear_errors() {
     println!("unknown table: {e:#}");
     assert!(format!("{e:#}").contains("creep"));
     let bad_hyst = format!(
-        "{good}\n[hysteresis]\nradii_v = [0.2, 0.6, 1.5, 3.5]\nweights = [5.0, 0.0, 0.0, 0.0]\n"
+        "{good}\n[hysteresis-play]\nradii_v = [0.2, 0.6, 1.5, 3.5]\nweights = [5.0, 0.0, 0.0, 0.0]\n"
     );
     let e = ModelFile::parse(&bad_hyst).unwrap_err();
     println!("bad hysteresis: {e:#}");

@@ -20,6 +20,7 @@
 //! fits `saturation` and `slew-rate-limit` as effects). A non-finite control input holds the
 //! previous output (documented safe behaviour; a real amplifier sees a DAC that has no NaN).
 
+use crate::limits::clamp_f32;
 use crate::limits::{ConfigError, check_period};
 use crate::params;
 
@@ -71,14 +72,16 @@ impl AmplifierConfig {
         }
         let (i0, i1) = self.input_range_v;
         let (o0, o1) = self.output_range_v;
-        if !(params::AMP_INPUT_MIN_V <= i0 && i0 < i1 && i1 <= params::AMP_INPUT_MAX_V)
-            || !(params::AMP_OUTPUT_MIN_V <= o0 && o0 < o1 && o1 <= params::AMP_OUTPUT_MAX_V)
-        {
+        let input_ok = params::AMP_INPUT_MIN_V <= i0 && i0 < i1 && i1 <= params::AMP_INPUT_MAX_V;
+        let output_ok = params::AMP_OUTPUT_MIN_V <= o0 && o0 < o1 && o1 <= params::AMP_OUTPUT_MAX_V;
+        if !(input_ok && output_ok) {
             return Err(ConfigError::BadWindow);
         }
         if let Some(s) = self.slew_v_per_s {
             let tol = 1.0 + 1e-9;
-            if !(s * tol >= params::AMP_SLEW_OUTPUT_MIN_V_PER_S && s <= params::AMP_SLEW_OUTPUT_V_PER_S * tol) {
+            if !(s * tol >= params::AMP_SLEW_OUTPUT_MIN_V_PER_S
+                && s <= params::AMP_SLEW_OUTPUT_V_PER_S * tol)
+            {
                 return Err(ConfigError::BadSlew);
             }
         }
@@ -153,7 +156,11 @@ impl Amplifier {
     #[inline]
     pub fn static_output(&self, u_v: f32) -> f32 {
         if self.saturation {
-            (u_v.clamp(self.in_lo, self.in_hi) * self.gain).clamp(self.out_lo, self.out_hi)
+            clamp_f32(
+                clamp_f32(u_v, self.in_lo, self.in_hi) * self.gain,
+                self.out_lo,
+                self.out_hi,
+            )
         } else {
             u_v * self.gain
         }
@@ -174,7 +181,11 @@ impl Amplifier {
             return s.output_v;
         }
         let target = self.static_output(u_v);
-        let d = (target - s.output_v).clamp(-self.slew_v_per_step, self.slew_v_per_step);
+        let d = clamp_f32(
+            target - s.output_v,
+            -self.slew_v_per_step,
+            self.slew_v_per_step,
+        );
         let v = s.output_v + d;
         // Without saturation a huge finite input may overflow to infinity: hold instead.
         if v.is_finite() {
@@ -193,10 +204,34 @@ mod tests {
         let c = AmplifierConfig::default();
         let t = 20e-6;
         let bad = |c: AmplifierConfig| Amplifier::new(&c, t).unwrap_err();
-        assert_eq!(bad(AmplifierConfig { slew_v_per_s: Some(1e3), ..c }), ConfigError::BadSlew);
-        assert_eq!(bad(AmplifierConfig { slew_v_per_s: Some(2e6), ..c }), ConfigError::BadSlew);
-        assert_eq!(bad(AmplifierConfig { output_range_v: (0.0, 150.0), ..c }), ConfigError::BadWindow);
-        assert_eq!(bad(AmplifierConfig { gain: f64::NAN, ..c }), ConfigError::NotFinite);
+        assert_eq!(
+            bad(AmplifierConfig {
+                slew_v_per_s: Some(1e3),
+                ..c
+            }),
+            ConfigError::BadSlew
+        );
+        assert_eq!(
+            bad(AmplifierConfig {
+                slew_v_per_s: Some(2e6),
+                ..c
+            }),
+            ConfigError::BadSlew
+        );
+        assert_eq!(
+            bad(AmplifierConfig {
+                output_range_v: (0.0, 150.0),
+                ..c
+            }),
+            ConfigError::BadWindow
+        );
+        assert_eq!(
+            bad(AmplifierConfig {
+                gain: f64::NAN,
+                ..c
+            }),
+            ConfigError::NotFinite
+        );
         let mut s = AmplifierState::default();
         let a = Amplifier::new(&c, t).unwrap();
         a.step(&mut s, 1.0);

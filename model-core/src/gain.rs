@@ -49,7 +49,10 @@ impl FastGainConfig {
     /// Finite, K' within 0.2..5 over the range, non-empty range inside -20..20 V, and
     /// `K'(u) u` strictly increasing on -20..20 V.
     pub fn validate(&self) -> Result<(), ConfigError> {
-        if self.poly.iter().any(|v| !v.is_finite()) || !self.range_v.0.is_finite() || !self.range_v.1.is_finite() {
+        if self.poly.iter().any(|v| !v.is_finite())
+            || !self.range_v.0.is_finite()
+            || !self.range_v.1.is_finite()
+        {
             return Err(ConfigError::NotFinite);
         }
         if !(self.range_v.0 < self.range_v.1 && self.range_v.0 >= -20.0 && self.range_v.1 <= 20.0) {
@@ -98,7 +101,7 @@ impl FastGain {
     /// K'(u). NaN gives NaN.
     #[inline]
     pub fn gain(&self, u_v: f32) -> f32 {
-        let x = u_v.clamp(self.lo_v, self.hi_v);
+        let x = u_v.max(self.lo_v).min(self.hi_v);
         self.poly[0] + x * (self.poly[1] + x * self.poly[2])
     }
 }

@@ -62,9 +62,11 @@
 //! level 0 (`u_min`) and every even level start a rising segment, odd levels a falling one.
 //!
 //! Bounded time: one look-up per step plus at most `HYST_MEMORY_DEPTH / 2` pops (the pops are
-//! amortised: each pushed point is popped once). The inverse is a bisection with a fixed
-//! [`params::HYST_INVERSE_ITERATIONS`] steps over the monotone one-step map, so it is
-//! consistent with `forward` by construction.
+//! amortised: each pushed point is popped once). The inverse solves the same one-step map
+//! exactly: the stored turning-point outputs say on which segment the wanted output lies, a
+//! binary search over the grid nodes finds the cell, and the bilinear Everett function, linear
+//! along the moving coordinate inside a cell, is solved in closed form; it is checked against
+//! a plain bisection of `forward` ([`HysteresisTable::inverse_by_bisection`]) in host-tests.
 //!
 //! # Edges and a full memory (defined behaviour)
 //! * **Input outside the range**: clamped to `[u_min, u_max]`, [`Flags::CLAMPED`] set in
@@ -86,6 +88,7 @@
 //! * **Changing the table under a memory**: the stored outputs belong to the table that made
 //!   them; call [`HysteresisMemory::reset`] after swapping tables.
 
+use crate::limits::clamp_f32;
 use crate::limits::{ConfigError, Flags};
 use crate::params;
 
@@ -347,8 +350,8 @@ impl HysteresisTable {
     #[inline]
     pub fn everett_v(&self, alpha_v: f32, beta_v: f32) -> f32 {
         let top = (GRID_NODES - 1) as f32;
-        let x = ((alpha_v - self.u_min_v) * self.inv_step_per_v).clamp(0.0, top);
-        let y = ((beta_v - self.u_min_v) * self.inv_step_per_v).clamp(0.0, x);
+        let x = clamp_f32((alpha_v - self.u_min_v) * self.inv_step_per_v, 0.0, top);
+        let y = clamp_f32((beta_v - self.u_min_v) * self.inv_step_per_v, 0.0, x);
         // Non-negative and below GRID_NODES - 1: the casts truncate towards zero (floor).
         let i = (x as usize).min(GRID_NODES - 2);
         let j = (y as usize).min(GRID_NODES - 2);
@@ -459,7 +462,7 @@ impl HysteresisTable {
         if u < self.u_min_v || u > self.u_max_v {
             *flags |= Flags::CLAMPED;
         }
-        Some(u.clamp(self.u_min_v, self.u_max_v))
+        Some(clamp_f32(u, self.u_min_v, self.u_max_v))
     }
 
     fn commit(&self, mem: &mut HysteresisMemory, u: f32, step: Step) {
@@ -514,12 +517,166 @@ impl HysteresisTable {
         }
     }
 
-    /// The input that gives `wanted_output_v` (sensor volts) from the present state, found by
-    /// a fixed [`params::HYST_INVERSE_ITERATIONS`]-step bisection of the monotone map
-    /// `u -> peek(u)`; `mem` advances as if that input were applied. A wanted output that the
-    /// history cannot reach saturates the input at the range edge ([`Flags::CLAMPED`]); a
-    /// non-finite one holds the last input ([`Flags::NONFINITE`]).
+    /// The input that gives `wanted_output_v` (sensor volts) from the present state; `mem`
+    /// advances as if that input were applied.
+    ///
+    /// Exact inversion of the monotone one-step map `u -> peek(u)`: the wanted output picks
+    /// the segment (the stored turning-point outputs say which loops the move would close),
+    /// then a binary search over the grid nodes inside that segment finds the cell, where the
+    /// bilinear Everett function is linear in the moving coordinate and is solved directly.
+    /// Bounded: at most `MEMORY_DEPTH / 2` segment checks and `log2(GRID_NODES) + 2` table
+    /// look-ups. A wanted output the history cannot reach saturates the input at the range edge
+    /// ([`Flags::CLAMPED`]); a non-finite one holds the last input ([`Flags::NONFINITE`]).
     pub fn inverse(&self, mem: &mut HysteresisMemory, wanted_output_v: f32) -> f32 {
+        self.ensure_init(mem);
+        let w = wanted_output_v;
+        if !w.is_finite() {
+            mem.flags = Flags::NONFINITE;
+            return mem.input_v;
+        }
+        let u = self.solve(mem, w);
+        let step = self.locate(mem, u);
+        let reached = step.output_v;
+        self.commit(mem, u, step);
+        let edge = u <= self.u_min_v || u >= self.u_max_v;
+        mem.flags = if edge && (reached - w).abs() > 1e-4 * (1.0 + w.abs()) {
+            Flags::CLAMPED
+        } else {
+            Flags::NONE
+        };
+        u
+    }
+
+    /// The input for output `w` from the state in `mem` (initialised), without changing it.
+    fn solve(&self, mem: &HysteresisMemory, w: f32) -> f32 {
+        let bottom = self.bottom();
+        let pts = mem.points.as_slice();
+        let n = pts.len().max(1);
+        let c = mem.input_v;
+        if w == mem.output_v {
+            return c;
+        }
+        let up = w > mem.output_v;
+        let top_rising = (n - 1).is_multiple_of(2);
+        let at = |k: usize| pts.get(k).copied().unwrap_or(bottom);
+        // The virtual stack of `locate` for a move in this direction.
+        let (mut real, mut virt) = if up != top_rising {
+            if n >= MEMORY_DEPTH {
+                let k = n - 3;
+                let y = self.segment(at(k), k.is_multiple_of(2), c);
+                (n - 2, Some(TurningPoint::new(c, y)))
+            } else {
+                (n, Some(TurningPoint::new(c, mem.output_v)))
+            }
+        } else {
+            (n, None)
+        };
+        // Where the move starts: the last input.
+        let mut start = c;
+        for _ in 0..=MEMORY_DEPTH {
+            let len = real + usize::from(virt.is_some());
+            let b = len - 1;
+            if b == 0 {
+                break;
+            }
+            let prev = at(b - 1);
+            let beyond = if up {
+                w > prev.output_v
+            } else {
+                w < prev.output_v
+            };
+            if !beyond {
+                break;
+            }
+            if b >= 2 {
+                start = prev.input_v;
+                if virt.take().is_some() {
+                    real -= 1;
+                } else {
+                    real -= 2;
+                }
+            } else {
+                // Below the bottom of the major loop.
+                return self.u_min_v;
+            }
+        }
+        let len = real + usize::from(virt.is_some());
+        let b = len - 1;
+        let base = match virt {
+            Some(p) => p,
+            None => at(b),
+        };
+        let rising = b.is_multiple_of(2);
+        // The segment's far end: the extremum that would be wiped next, or the range edge.
+        let end = if b == 0 {
+            self.u_max_v
+        } else {
+            at(b - 1).input_v
+        };
+        let seg = |u: f32| self.segment(base, rising, u);
+        if up {
+            self.solve_piecewise(start, end, w, seg)
+        } else {
+            self.solve_piecewise(end, start, w, seg)
+        }
+    }
+
+    /// Solve `h(u) = w` on `[lo, hi]` for `h` non-decreasing and linear between grid nodes;
+    /// saturates at the ends.
+    fn solve_piecewise(&self, lo: f32, hi: f32, w: f32, h: impl Fn(f32) -> f32) -> f32 {
+        if hi <= lo {
+            return lo;
+        }
+        let (mut xa, mut ya) = (lo, h(lo));
+        let (mut xb, mut yb) = (hi, h(hi));
+        if w <= ya {
+            return lo;
+        }
+        if w >= yb {
+            return hi;
+        }
+        // Grid nodes strictly inside (lo, hi): indices first..=last.
+        let top = (GRID_NODES - 1) as f32;
+        let x_lo = clamp_f32((lo - self.u_min_v) * self.inv_step_per_v, 0.0, top);
+        let x_hi = clamp_f32((hi - self.u_min_v) * self.inv_step_per_v, 0.0, top);
+        let mut first = x_lo as usize + 1;
+        let mut last = (x_hi as usize).min(GRID_NODES - 1);
+        if self.node_v(last) >= hi {
+            last = last.saturating_sub(1);
+        }
+        // Binary search over the nodes: keep h(xa) < w <= h(xb).
+        for _ in 0..GRID_NODES.ilog2() + 2 {
+            if first > last {
+                break;
+            }
+            let mid = first + (last - first) / 2;
+            let x = self.node_v(mid);
+            if x <= xa || x >= xb {
+                break;
+            }
+            let y = h(x);
+            if y < w {
+                (xa, ya) = (x, y);
+                first = mid + 1;
+            } else {
+                (xb, yb) = (x, y);
+                if mid == 0 {
+                    break;
+                }
+                last = mid - 1;
+            }
+        }
+        if yb > ya {
+            clamp_f32(xa + (xb - xa) * ((w - ya) / (yb - ya)), xa, xb)
+        } else {
+            xb
+        }
+    }
+
+    /// The inverse by a fixed [`params::HYST_INVERSE_ITERATIONS`]-step bisection of
+    /// `u -> peek(u)` over the whole range: slower than [`HysteresisTable::inverse`] (a full
+    /// memory walk per step), kept as its independent cross-check. Advances `mem` likewise.
+    pub fn inverse_by_bisection(&self, mem: &mut HysteresisMemory, wanted_output_v: f32) -> f32 {
         self.ensure_init(mem);
         if !wanted_output_v.is_finite() {
             mem.flags = Flags::NONFINITE;
@@ -531,34 +688,24 @@ impl HysteresisTable {
         } else {
             (self.u_min_v, c)
         };
-        let mut flags = Flags::NONE;
-        let y_hi = self.locate(mem, hi).output_v;
-        let y_lo = self.locate(mem, lo).output_v;
-        let u = if wanted_output_v >= y_hi {
-            if wanted_output_v > y_hi {
-                flags |= Flags::CLAMPED;
+        for _ in 0..params::HYST_INVERSE_ITERATIONS {
+            let mid = 0.5 * (lo + hi);
+            if self.locate(mem, mid).output_v < wanted_output_v {
+                lo = mid;
+            } else {
+                hi = mid;
             }
+        }
+        let u = if self.locate(mem, hi).output_v <= wanted_output_v {
             hi
-        } else if wanted_output_v <= y_lo {
-            if wanted_output_v < y_lo {
-                flags |= Flags::CLAMPED;
-            }
+        } else if self.locate(mem, lo).output_v >= wanted_output_v {
             lo
         } else {
-            // Invariant: peek(lo) < wanted < peek(hi).
-            for _ in 0..params::HYST_INVERSE_ITERATIONS {
-                let mid = 0.5 * (lo + hi);
-                if self.locate(mem, mid).output_v < wanted_output_v {
-                    lo = mid;
-                } else {
-                    hi = mid;
-                }
-            }
             0.5 * (lo + hi)
         };
         let step = self.locate(mem, u);
         self.commit(mem, u, step);
-        mem.flags = flags;
+        mem.flags = Flags::NONE;
         u
     }
 }
@@ -628,7 +775,7 @@ impl HysteresisMemory {
     pub fn reset(&mut self, table: &HysteresisTable, input_v: f32) {
         let (lo, hi) = table.input_range_v();
         let u = if input_v.is_finite() {
-            input_v.clamp(lo, hi)
+            clamp_f32(input_v, lo, hi)
         } else {
             lo
         };

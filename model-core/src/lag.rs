@@ -153,33 +153,53 @@ impl LagCompensator {
     /// [`Self::update`], also returning what the limits did.
     #[inline]
     pub fn update_flags(&self, state: &mut LagState, error_v: f32) -> (f32, Flags) {
+        self.update_ff(state, error_v, 0.0)
+    }
+
+    /// One sample with a feedforward term added to the compensator's output before the
+    /// limits (for example the hysteresis inverse's non-linear part). The anti-windup treats
+    /// the sum: when it is limited, the integrator takes up the difference, so the states
+    /// describe the command really sent. A non-finite feedforward is treated as zero and
+    /// flagged.
+    #[inline]
+    pub fn update_ff(
+        &self,
+        state: &mut LagState,
+        error_v: f32,
+        feedforward_v: f32,
+    ) -> (f32, Flags) {
         if state.held {
             return (state.last_v, Flags::HELD);
         }
         if !error_v.is_finite() {
             return (state.last_v, Flags::NONFINITE);
         }
+        let (ff, ff_flags) = if feedforward_v.is_finite() {
+            (feedforward_v, Flags::NONE)
+        } else {
+            (0.0, Flags::NONFINITE)
+        };
         let e_sum = error_v + state.e_prev;
         state.e_prev = error_v;
         let lag_before = state.lag;
         state.integ.add(self.int_gain * e_sum);
         let w = state.lag.value();
         state.lag.add(self.lag_gain * e_sum - self.lag_alpha * w);
-        let raw = state.integ.value() + state.lag.value();
+        let raw = state.integ.value() + state.lag.value() + ff;
         let (out, flags) = self.limits.apply(state.last_v, raw);
         if flags.contains(Flags::NONFINITE) {
             // The states overflowed: restart them from the last safe command.
-            state.reload(state.last_v);
+            state.reload(state.last_v - ff);
         } else if out != raw {
             // Anti-windup: the lag state keeps its value from before this step and the
             // integrator takes up the rest, so the states describe the command really sent.
             state.lag = lag_before;
             state
                 .integ
-                .add(out - (state.integ.value() + state.lag.value()));
+                .add(out - (state.integ.value() + state.lag.value() + ff));
         }
         state.last_v = out;
-        (out, flags)
+        (out, flags | ff_flags)
     }
 }
 
@@ -223,6 +243,15 @@ impl LagState {
         };
         self.reload(v);
         self.last_v = v;
+    }
+
+    /// Bumpless reset when a feedforward term `feedforward_v` will be added: the states hold
+    /// `output_v - feedforward_v`, the command stays `output_v`.
+    pub fn reset_with_feedforward(&mut self, output_v: f32, feedforward_v: f32) {
+        self.reset_to(output_v);
+        if feedforward_v.is_finite() {
+            self.reload(self.last_v - feedforward_v);
+        }
     }
 
     /// Freeze (`true`) or release (`false`) the compensator; the command stays where it is.

@@ -22,9 +22,12 @@
 //! * [`plant`]: the linear plant of eq. 4.4 as an exact fixed-step simulator.
 //! * [`controller`]: the one per-sample function the firmware's interrupt and the QEMU runs
 //!   call: modes, faults, compensator, limits.
+//! * [`hysteresis`]: the static hysteretic map (Everett table) with its turning-point memory.
+//! * [`prefilter`]: the reference pre-filter `H'` (eq. 4.12), derived from the loop at run time.
+//! * [`reference`](mod@reference): reference generators (step, ramp, sine, triangle, square, sweep) with preview.
 //! * [`drift`], [`gain`], [`amplifier`], [`sensor`]: the non-linear blocks of ch. 5.
 //! * [`stage`]: the ch. 6 overall model composed of all blocks (the wiring is stated there).
-//! * [`hysteresis`]: the static hysteretic map (Everett table) with its turning-point memory.
+//! * [`frame`]: the capture wire format (firmware encoder, host decoder).
 //!
 //! Each block keeps its configuration (coefficients, `Copy`) apart from its state, so a new
 //! configuration can be computed outside the interrupt and swapped in whole.
@@ -37,6 +40,7 @@ pub mod codes;
 pub mod controller;
 pub mod discretize;
 pub mod drift;
+pub mod frame;
 pub mod gain;
 pub mod hysteresis;
 pub mod lag;
@@ -44,6 +48,9 @@ pub mod limits;
 pub mod params;
 pub mod plant;
 pub mod play;
+pub mod prefilter;
+pub mod reference;
+pub mod scenarios;
 pub mod sections;
 pub mod sensor;
 pub mod stage;

@@ -94,6 +94,17 @@ impl core::fmt::Display for ConfigError {
     }
 }
 
+/// `x` limited to `[lo, hi]`, for the per-sample path: unlike `f32::clamp` it never panics
+/// (`clamp` panics when a bound is NaN or `lo > hi`, and the compiler keeps that panic path in
+/// the interrupt unless it can prove the bounds), and it compiles to compares where
+/// `f32::max`/`min` call `fmaxf`/`fminf` on thumbv7em. A NaN `x` gives `lo`; `lo > hi` gives
+/// `hi`.
+#[inline]
+pub fn clamp_f32(x: f32, lo: f32, hi: f32) -> f32 {
+    let y = if x >= lo { x } else { lo };
+    if y > hi { hi } else { y }
+}
+
 /// Checks a sample period against the allowed rates and returns it.
 pub fn check_period(period_s: f64) -> Result<f64, ConfigError> {
     if !period_s.is_finite() {
@@ -226,6 +237,14 @@ mod tests {
         );
         assert_eq!(l.apply(0.5, -1.0), (0.0, Flags::CLAMPED));
         assert_eq!(l.apply(f32::NAN, f32::NAN).0, 0.0);
+    }
+
+    #[test]
+    fn clamp_never_panics() {
+        assert_eq!(clamp_f32(5.0, 0.0, 1.0), 1.0);
+        assert_eq!(clamp_f32(-5.0, 0.0, 1.0), 0.0);
+        assert_eq!(clamp_f32(f32::NAN, 0.0, 1.0), 0.0);
+        assert_eq!(clamp_f32(0.5, 2.0, 1.0), 1.0);
     }
 
     #[test]

@@ -104,54 +104,6 @@ pub const SENSOR_STUCK_SAMPLES: u32 = 250;
 /// Command movement that must show on the sensor, volts at the amplifier input (moves the
 /// stage by about 80 mV of monitor signal, 260 ADC codes).
 pub const SENSOR_STUCK_COMMAND_V: f64 = 0.1;
-// ==============================================================================// ----- The non-linear stage (issue #4): drift, fast gain, amplifier model, sensor model. -----
-// =====================================================================================
-
-// Drift, eq. 5.1 (sec. 5.2): three parallel first-order lags fitted on a 1 V step.
-/// Gains of the three drift lags, sensor volts per volt of (gain-weighted) input (eq. 5.1).
-pub const DRIFT_GAINS: [f64; 3] = [0.05, 0.05, 0.055];
-/// Time constants of the three drift lags, seconds (eq. 5.1).
-pub const DRIFT_TAUS_S: [f64; 3] = [0.06, 0.75, 12.0];
-/// Normalised drift gain polynomial K(u) = c0 + c1 u + c2 u^2 + c3 u^3, eq. 5.3, coefficients
-/// lowest power first (K(1) = 1).
-pub const DRIFT_POLY: [f64; 4] = [0.6121, 0.5472, -0.1733, 0.0140];
-/// The un-normalised eq. 5.2 (drift gain per volt of step over about 600 s), lowest power
-/// first; kept for the record and for the normalisation test.
-pub const DRIFT_POLY_UNNORMALISED: [f64; 4] = [0.1204, 0.1077, -0.0341, 0.0027];
-/// Range of step heights over which K(u) is evaluated; outside it K is held at the edge value
-/// (our assumption: the thesis fitted 1..6 V steps from 0 V, fig. 3.9; K(0) = 0.61 is finite so
-/// the range is extended down to 0 V; above 6 V the cubic turns up steeply, K(10) = 2.75,
-/// which no data supports).
-pub const DRIFT_POLY_U_RANGE_V: (f64, f64) = (0.0, 6.0);
-
-// Non-linear fast gain K'(u), sec. 3.1 / 5.1 (fig. 3.10): no coefficients printed.
-/// K'(u) = c0 + c1 u + c2 u^2 (our assumption): 1 at 0 V, growing almost linearly with the
-/// input (+2 %/V near 0 V) and flattening to +10 % at 10 V, where its slope is 0 (the
-/// "plateau" of sec. 5.1). `0.79 K'(u) u` stays strictly increasing on the range.
-pub const FAST_GAIN_POLY: [f64; 3] = [1.0, 0.02, -0.001];
-/// Range of inputs over which K'(u) is evaluated; held at the edge values outside (our
-/// assumption: the amplifier's useful 0..10 V at its control input).
-pub const FAST_GAIN_U_RANGE_V: (f64, f64) = (0.0, 10.0);
-
-// Sensor and converters in the stage model.
-/// Sensor gain of the stage model, monitor volts per volt of position (1: the plant's 0.79
-/// already maps to monitor volts; our assumption).
-pub const SENSOR_GAIN: f64 = 1.0;
-/// Default seed of the sensor noise generator (any value; our assumption).
-pub const SENSOR_NOISE_SEED: u64 = 0x5EED_0F_E509;
-
-// Second resonance mode (issue #7, "two peaks near 5.7 kHz", sec. 4.1.1): disabled by default.
-/// Frequency of a second stage mode when one is switched on, Hz (our assumption).
-pub const SECOND_MODE_HZ: f64 = 6300.0;
-/// Damping of the second mode (our assumption).
-pub const SECOND_MODE_DAMPING: f64 = 0.05;
-/// Largest extra delay the model file accepts, seconds (our assumption; the plant's delay line
-/// holds 62 samples at 50 kHz = 1.24 ms in total).
-pub const MAX_DELAY_S: f64 = 1.0e-3;
-
-// Stage simulation step.
-/// Fixed step of the stage model (the loop rate, sec. 2.3.1).
-pub const STAGE_PERIOD_S: f64 = 1.0 / SAMPLE_RATE_HZ;
 // ----- Hysteresis table (sec. 3.2, 5.3; issue #4). -----
 /// Nodes per axis of the Everett grid (turning-up value alpha, turning-down value beta).
 /// The table stores the strictly lower triangle alpha > beta: 45 * 44 / 2 = 990 `f32`, so the
@@ -185,8 +137,171 @@ pub const HYST_FORC_STEP_V: f64 = 0.15;
 /// Frequency of the preconditioning sinusoid (sec. 5.3.4).
 pub const HYST_FORC_PRECONDITION_HZ: f64 = 1.0;
 
+// ----- QEMU smoke scenarios (issue #6; `scenarios.rs`). All our assumptions. -----
+/// Simulated time per scenario, seconds (25 000 samples at 50 kHz).
+pub const SCENARIO_DURATION_S: f64 = 0.5;
+/// Set-point of the step and of the fault scenarios, sensor volts (6 um).
+pub const SCENARIO_STEP_V: f64 = 5.0;
+/// When the step (and the triangle) starts, seconds.
+pub const SCENARIO_STEP_AT_S: f64 = 1e-3;
+/// Time after the step from which the peak error is taken, seconds: nine times the 2 %
+/// settling time of the thesis loop (1.14 ms, README).
+pub const SCENARIO_SETTLE_S: f64 = 10e-3;
+/// Largest error after settling and final error of the set-point scenarios, sensor volts:
+/// four times the sensor's +-2.5 mV noise.
+pub const SCENARIO_TRACKING_TOL_V: f64 = 4.0 * SENSOR_NOISE_V;
+/// Frequency of the triangle scenario, Hz.
+pub const SCENARIO_TRIANGLE_HZ: f64 = 100.0;
+/// Offset of the triangle, sensor volts (issue #3's tracking measurements: 6 V p-p around
+/// 4 V).
+pub const SCENARIO_TRIANGLE_OFFSET_V: f64 = 4.0;
+/// Amplitude (peak) of the triangle, sensor volts.
+pub const SCENARIO_TRIANGLE_AMPLITUDE_V: f64 = 3.0;
+/// Tracking error of the triangle by feedback alone, sensor volts. Over a half period (5 ms,
+/// far shorter than the lag's 1/p = 2.5 s) the compensator acts as the integrator
+/// `Kc p / s`, so a ramp of slope `4 A f` leaves the error `4 A f / (Kc p K)`
+/// (1200 V/s / 3144 /s = 0.38 V).
+pub const SCENARIO_TRIANGLE_VELOCITY_ERR_V: f64 =
+    4.0 * SCENARIO_TRIANGLE_AMPLITUDE_V * SCENARIO_TRIANGLE_HZ
+        / (LAG_KC * LAG_POLE_RAD_S * PLANT_GAIN);
+/// Bound on the feedback-only triangle's peak error, in units of
+/// [`SCENARIO_TRIANGLE_VELOCITY_ERR_V`]: room for the corners.
+pub const SCENARIO_TRIANGLE_PEAK_FACTOR: f64 = 1.5;
+/// The pre-filter must cut the triangle's RMS error below the feedback-only velocity error
+/// divided by this (issue #3: a tenfold cut at 100 Hz).
+pub const SCENARIO_PREFILTER_CUT: f64 = 10.0;
+/// Bound on the RMS tracking error on the ch. 6 stage, as a fraction of the triangle's span
+/// (the lead's criterion in host-tests `controller.rs`: within 2 %, feedforward on or off).
+pub const SCENARIO_FULL_STAGE_RMS_FRAC: f64 = 0.02;
+/// When faults are injected, seconds.
+pub const SCENARIO_FAULT_AT_S: f64 = 0.2;
+/// When the reference moves in the stuck-sensor scenario, seconds (50 ms after the sensor
+/// froze, so the stuck detector has long counted its 5 ms of frozen code).
+pub const SCENARIO_MOVE_AT_S: f64 = 0.25;
+/// Where the reference moves in the stuck-sensor scenario, sensor volts.
+pub const SCENARIO_MOVE_TO_V: f64 = 7.0;
+/// The absurd gain offered in the absurd-gain scenario (a thousand times [`LAG_KC_MAX`]).
+pub const SCENARIO_ABSURD_KC: f64 = 1.0e9;
+/// Seed of the scenarios' sensor noise generator.
+pub const SCENARIO_NOISE_SEED: u32 = 0x2545_f491;
+// ----- Pre-filter and reference generators (sec. 4.1.2.4, eq. 4.8-4.13; issue #3). -----
+/// Time constant of the four planning poles `1/(tau s + 1)^4` (our assumption, chosen by the
+/// trade-off measured in `host-tests/tests/prefilter.rs`: see the design note of
+/// `prefilter.rs`). The thesis gives no value.
+pub const PREFILTER_TAU_S: f64 = 50e-6;
+/// Shortest tau a configuration may ask for (our assumption: below it the pre-filter's
+/// high-frequency gain `1/(p we wn^2 Kc K tau^4)` passes 1000).
+pub const PREFILTER_TAU_MIN_S: f64 = 10e-6;
+/// Longest tau a configuration may ask for (our assumption: 4 tau = 4 ms of preview).
+pub const PREFILTER_TAU_MAX_S: f64 = 1e-3;
+/// Longest preview (reference advance) a generator offers, samples (our assumption: covers
+/// 4 tau + loop delay at the longest tau and the highest rate).
+pub const MAX_PREVIEW_SAMPLES: u32 = 1024;
+/// Sensor monitor range, volts (E-509: 0..10 V for 0..12 um, sec. 2.4).
+pub const SENSOR_MIN_V: f64 = 0.0;
+/// Sensor monitor range, volts (E-509: 0..10 V for 0..12 um, sec. 2.4).
+pub const SENSOR_MAX_V: f64 = 10.0;
+/// Sensor noise used by the tracking measurements of issue #3 (1 mV, 1 sigma).
+pub const TRACK_NOISE_V: f64 = 1e-3;
+
 // =====================================================================================
-// ----- The model-gap workflow (issue #7): fitted hysteresis form and gap thresholds. -----
+// ----- The non-linear stage (issue #4): drift, fast gain, amplifier model, sensor model. -----
+// =====================================================================================
+
+// Drift, eq. 5.1 (sec. 5.2): three parallel first-order lags fitted on a 1 V step.
+/// Gains of the three drift lags, sensor volts per volt of (gain-weighted) input (eq. 5.1).
+pub const DRIFT_GAINS: [f64; 3] = [0.05, 0.05, 0.055];
+/// Time constants of the three drift lags, seconds (eq. 5.1).
+pub const DRIFT_TAUS_S: [f64; 3] = [0.06, 0.75, 12.0];
+/// Normalised drift gain polynomial K(u) = c0 + c1 u + c2 u^2 + c3 u^3, eq. 5.3, coefficients
+/// lowest power first (K(1) = 1).
+pub const DRIFT_POLY: [f64; 4] = [0.6121, 0.5472, -0.1733, 0.0140];
+/// The un-normalised eq. 5.2 (drift gain per volt of step over about 600 s), lowest power
+/// first; kept for the record and for the normalisation test.
+pub const DRIFT_POLY_UNNORMALISED: [f64; 4] = [0.1204, 0.1077, -0.0341, 0.0027];
+/// Range of step heights over which K(u) is evaluated; outside it K is held at the edge value
+/// (our assumption: the thesis fitted 1..6 V steps from 0 V, fig. 3.9; K(0) = 0.61 is finite so
+/// the range is extended down to 0 V; above 6 V the cubic turns up steeply, K(10) = 2.75,
+/// which no data supports).
+pub const DRIFT_POLY_U_RANGE_V: (f64, f64) = (0.0, 6.0);
+
+// Non-linear fast gain K'(u), sec. 3.1 / 5.1 (fig. 3.10): no coefficients printed.
+/// K'(u) = c0 + c1 u + c2 u^2 (our assumption): 1 at 0 V, growing almost linearly with the
+/// input (+2 %/V near 0 V) and flattening to +10 % at 10 V, where its slope is 0 (the
+/// "plateau" of sec. 5.1). `0.79 K'(u) u` stays strictly increasing on the range.
+pub const FAST_GAIN_POLY: [f64; 3] = [1.0, 0.02, -0.001];
+/// Range of inputs over which K'(u) is evaluated; held at the edge values outside (our
+/// assumption: the amplifier's useful 0..10 V at its control input).
+pub const FAST_GAIN_U_RANGE_V: (f64, f64) = (0.0, 10.0);
+
+// Sensor and converters in the stage model.
+/// Sensor gain of the stage model, monitor volts per volt of position (1: the plant's 0.79
+/// already maps to monitor volts; our assumption).
+pub const SENSOR_GAIN: f64 = 1.0;
+/// Default seed of the sensor noise generator (any value; our assumption).
+pub const SENSOR_NOISE_SEED: u64 = 0x005E_ED0F_E509;
+
+// Second resonance mode (issue #7, "two peaks near 5.7 kHz", sec. 4.1.1): disabled by default.
+/// Frequency of a second stage mode when one is switched on, Hz (our assumption).
+pub const SECOND_MODE_HZ: f64 = 6300.0;
+/// Damping of the second mode (our assumption).
+pub const SECOND_MODE_DAMPING: f64 = 0.05;
+/// Largest extra delay the model file accepts, seconds (our assumption; the plant's delay line
+/// holds 62 samples at 50 kHz = 1.24 ms in total).
+pub const MAX_DELAY_S: f64 = 1.0e-3;
+
+// Stage simulation step.
+/// Fixed step of the stage model (the loop rate, sec. 2.3.1).
+pub const STAGE_PERIOD_S: f64 = 1.0 / SAMPLE_RATE_HZ;
+// ----- Firmware: board, command limits, capture (issue #5; our assumptions). -----
+/// Records the firmware's capture buffer holds: 1 s at 50 kHz. At 8 bytes a record
+/// (`frame::RECORD_LEN`) that is 400 kB of the H743's 512 KiB AXI SRAM (our assumption).
+pub const FW_CAPTURE_RECORDS: usize = 50_000;
+/// Baud rate of the command and capture link over the ST-LINK virtual COM port (USART3);
+/// the ST-LINK V3 bridges it to USB (our assumption).
+pub const FW_UART_BAUD: u32 = 921_600;
+/// Highest frequency of an on-board sine or triangle reference, Hz: twice the closed-loop
+/// bandwidth of about 1 kHz (model card); our assumption.
+pub const FW_REF_MAX_FREQ_HZ: f64 = 2_000.0;
+/// Lowest frequency of an on-board sine or triangle reference, Hz (our assumption).
+pub const FW_REF_MIN_FREQ_HZ: f64 = 0.001;
+/// Lowest sensor monitor voltage a reference may ask for, volts (E-509 range 0..10 V, sec. 2.4).
+pub const FW_REF_MIN_V: f64 = 0.0;
+/// Highest sensor monitor voltage a reference may ask for, volts (10 V = 12 um, sec. 2.4).
+pub const FW_REF_MAX_V: f64 = 10.0;
+/// Shortest pre-filter time constant a command may set, seconds (our assumption).
+pub const FW_TAU_MIN_S: f64 = 1.0e-6;
+/// Longest pre-filter time constant a command may set, seconds (our assumption).
+pub const FW_TAU_MAX_S: f64 = 0.1;
+/// Independent watchdog (IWDG) timeout, seconds: the chip resets if the interrupt or the
+/// tasks stop for this long (our assumption).
+pub const FW_IWDG_TIMEOUT_S: f64 = 0.1;
+/// How often the supervisor task checks liveness and may feed the IWDG, seconds.
+pub const FW_SUPERVISOR_PERIOD_S: f64 = 0.01;
+/// The interrupt raises the watchdog fault (and ramps to safe) when the tasks have not
+/// checked in for this long, seconds: well before the IWDG bites (our assumption).
+pub const FW_TASK_STALL_S: f64 = 0.05;
+/// Heartbeat LED half period, seconds.
+pub const FW_HEARTBEAT_HALF_PERIOD_S: f64 = 0.25;
+/// SPI clock of the external DAC, Hz (DAC8311 allows 50 MHz, AD5641 30 MHz; our choice leaves
+/// margin for wiring): a 16-bit frame takes 1.3 us.
+pub const FW_DAC_SPI_HZ: u32 = 12_500_000;
+/// ADC front end (firmware README): series resistor from the sensor monitor to the buffer
+/// input, ohms (our design).
+pub const FW_ADC_R_IN_OHM: f64 = 100.0e3;
+/// ADC front end: resistor from VREF+ to the buffer input, ohms (E96; our design).
+pub const FW_ADC_R_REF_OHM: f64 = 32.4e3;
+/// ADC front end: resistor from the buffer input to ground, ohms (E96; our design).
+pub const FW_ADC_R_GND_OHM: f64 = 48.7e3;
+/// VREF+ of the NUCLEO-H743ZI2 (tied to VDDA, 3.3 V; UM2407).
+pub const FW_ADC_VREF_V: f64 = 3.3;
+/// Largest gain correction a `cal` command may set (our assumption: +-10 %).
+pub const FW_CAL_MAX_GAIN_ERROR: f64 = 0.1;
+/// Largest offset correction a `cal` command may set, volts (our assumption).
+pub const FW_CAL_MAX_OFFSET_V: f64 = 0.5;
+
+// =====================================================================================
+// ----- The model-gap workflow (issue #7): fitted hysteresis form. -----
 // =====================================================================================
 /// Number of play operators of the fitted hysteresis form [`crate::play`] (our assumption:
 /// four thresholds spread over the 10 V range are enough to bring a 15 % loop to a few mV).

@@ -74,7 +74,8 @@ impl SplitMix64 {
     #[inline]
     pub fn standard_normal(&mut self) -> f32 {
         let r = self.next_u64();
-        let u = |k: u32| ((r >> (16 * k)) & 0xFFFF) as f32 * (1.0 / 65536.0) - (0.5 - 0.5 / 65536.0);
+        let u =
+            |k: u32| ((r >> (16 * k)) & 0xFFFF) as f32 * (1.0 / 65536.0) - (0.5 - 0.5 / 65536.0);
         // Each uniform has variance 1/12 (to 1e-10): the sum of four has 1/3.
         (u(0) + u(1) + u(2) + u(3)) * 1.732_050_8
     }
@@ -134,7 +135,11 @@ impl Sensor {
         if self.noise_v > 0.0 {
             y += self.noise_v * s.rng.standard_normal();
         }
-        if self.adc { AdcCode::from_volts(y).volts() } else { y }
+        if self.adc {
+            AdcCode::from_volts(y).volts()
+        } else {
+            y
+        }
     }
 }
 
@@ -155,6 +160,9 @@ mod tests {
         }
         let mean = s1 / n as f64;
         let var = s2 / n as f64 - mean * mean;
-        assert!(mean.abs() < 0.01 && (var - 1.0).abs() < 0.01, "mean {mean} var {var}");
+        assert!(
+            mean.abs() < 0.01 && (var - 1.0).abs() < 0.01,
+            "mean {mean} var {var}"
+        );
     }
 }

@@ -51,7 +51,7 @@
 //! Every effect the model-gap workflow (issue #7) names is a field of [`StageConfig`]:
 //! `time-delay` = `delay_s` (0 is off), `amplifier-pole` = `amp_pole_hz` (`None` is off),
 //! `resonance` = `second_mode` (the stage's own mode is always there), `drift` = `drift`,
-//! `hysteresis` = the table passed to [`Stage::new`], `nonlinear-gain` = `nonlinear_gain`,
+//! `hysteresis` = `hysteresis` (the table), `nonlinear-gain` = `nonlinear_gain`,
 //! `slew-rate-limit` = `amplifier.slew_v_per_s`, `saturation` = `amplifier.saturation`.
 //! The converters are `dac` and `sensor.adc`, the noise `sensor.noise_v`.
 //!
@@ -67,10 +67,14 @@ use crate::codes::DacCode;
 use crate::discretize::zoh_delayed;
 use crate::drift::{Drift, DriftConfig, DriftState};
 use crate::gain::{FastGain, FastGainConfig};
+use crate::hysteresis::{HysteresisMemory, HysteresisTable};
+use crate::play::{Play, PlayConfig, PlayState};
+use crate::limits::clamp_f32;
 use crate::limits::{ConfigError, check_period};
 use crate::params;
-use crate::play::{Play, PlayConfig, PlayState};
-use crate::plant::{LinearPlant, LinearPlantConfig, MAX_DELAY_SAMPLES, PlantState, continuous_state_space};
+use crate::plant::{
+    LinearPlant, LinearPlantConfig, MAX_DELAY_SAMPLES, PlantState, continuous_state_space,
+};
 use crate::sensor::{Sensor, SensorConfig, SensorState};
 use core::f64::consts::PI;
 
@@ -95,6 +99,11 @@ pub struct StageConfig {
     /// Static gain of the fast part without hysteresis, sensor volts per volt (0.79, eq. 4.4).
     /// With a hysteresis table the table's own curve replaces it.
     pub static_gain: f64,
+    /// The hysteresis table (`hysteresis`; `None`: the fast part is `static_gain * ue`).
+    pub hysteresis: Option<HysteresisTable>,
+    /// The play-operator hysteresis the model-gap workflow fits (`hysteresis`,
+    /// [`crate::play`]), added to the fast map before K'(u); `None`: off.
+    pub play: Option<PlayConfig>,
     /// K'(u), the fast part's amplitude-dependent gain (`nonlinear-gain`).
     pub nonlinear_gain: Option<FastGainConfig>,
     /// The drift branch (`drift`).
@@ -105,9 +114,6 @@ pub struct StageConfig {
     pub mode: ModeConfig,
     /// A second mode in series (`resonance`).
     pub second_mode: Option<ModeConfig>,
-    /// The fitted play-operator hysteresis of the model-gap workflow (`hysteresis`), added to
-    /// the fast static map before K'(u) ([`crate::play`]).
-    pub play: Option<PlayConfig>,
     /// Pure delay, seconds (`time-delay`; 0 is off).
     pub delay_s: f64,
     /// The sensor monitor and ADC.
@@ -128,6 +134,8 @@ impl StageConfig {
                 ..AmplifierConfig::default()
             },
             static_gain: params::PLANT_GAIN,
+            hysteresis: None,
+            play: None,
             nonlinear_gain: None,
             drift: None,
             amp_pole_hz: Some(params::AMP_POLE_HZ),
@@ -136,7 +144,6 @@ impl StageConfig {
                 damping: params::STAGE_DAMPING,
             },
             second_mode: None,
-            play: None,
             delay_s: params::PLANT_DELAY_S,
             sensor: SensorConfig {
                 noise_v: 0.0,
@@ -146,12 +153,13 @@ impl StageConfig {
         }
     }
 
-    /// The ch. 6 overall model without its hysteresis table (which [`Stage::new`] takes
-    /// separately): eq. 4.4 plus drift, K'(u), the amplifier's ranges and slew limiter, the
-    /// converters and the sensor noise.
+    /// The ch. 6 overall model: eq. 4.4 plus the default hysteresis table
+    /// ([`HysteresisTable::thesis_default`]), drift, K'(u), the amplifier's ranges and slew
+    /// limiter, the converters and the sensor noise.
     pub fn thesis_full() -> Self {
         Self {
             dac: true,
+            hysteresis: Some(HysteresisTable::thesis_default()),
             amplifier: AmplifierConfig::default(),
             nonlinear_gain: Some(FastGainConfig::default()),
             drift: Some(DriftConfig::default()),
@@ -201,7 +209,11 @@ impl TwoModes {
         if !(m.mode_hz.is_finite() && m.damping.is_finite()) {
             return Err(ConfigError::NotFinite);
         }
-        if !(m.mode_hz > 0.0 && m.mode_hz < 0.5 / p.period_s && m.damping > 0.0 && m.damping <= 10.0) {
+        if !(m.mode_hz > 0.0
+            && m.mode_hz < 0.5 / p.period_s
+            && m.damping > 0.0
+            && m.damping <= 10.0)
+        {
             return Err(ConfigError::BadGain);
         }
         let (a3, b3) = continuous_state_space(p);
@@ -249,12 +261,24 @@ impl TwoModes {
         if let Some(slot) = s.line.get_mut(s.head) {
             *slot = u;
         }
-        let u_new = s.line.get((s.head + n - self.delay_samples) % n).copied().unwrap_or(u);
-        let u_old = s.line.get((s.head + n - self.delay_samples - 1) % n).copied().unwrap_or(u);
+        let u_new = s
+            .line
+            .get((s.head + n - self.delay_samples) % n)
+            .copied()
+            .unwrap_or(u);
+        let u_old = s
+            .line
+            .get((s.head + n - self.delay_samples - 1) % n)
+            .copied()
+            .unwrap_or(u);
         let x = s.x;
         for (i, xi) in s.x.iter_mut().enumerate() {
             let row = &self.phi[i];
-            *xi = row[0] * x[0] + row[1] * x[1] + row[2] * x[2] + row[3] * x[3] + row[4] * x[4]
+            *xi = row[0] * x[0]
+                + row[1] * x[1]
+                + row[2] * x[2]
+                + row[3] * x[3]
+                + row[4] * x[4]
                 + self.gamma_new[i] * u_new
                 + self.gamma_old[i] * u_old;
         }
@@ -269,22 +293,25 @@ pub struct Stage {
     amplifier: Amplifier,
     inv_nominal_gain: f32,
     static_gain: f32,
+    hysteresis: Option<HysteresisTable>,
+    play: Option<Play>,
     nonlinear_gain: Option<FastGain>,
     drift: Option<Drift>,
     plant: LinearPlant,
     second_mode: Option<TwoModes>,
-    play: Option<Play>,
     sensor: Sensor,
 }
 
 /// Everything the stage remembers between steps, and the signals of the last step.
-#[derive(Clone, Copy, Debug, PartialEq)]
+/// (`Clone`, not `Copy`: the hysteresis memory is a bounded `heapless` stack.)
+#[derive(Clone, Debug, PartialEq)]
 pub struct StageState {
     amplifier: AmplifierState,
+    hysteresis: HysteresisMemory,
+    play: PlayState,
     drift: DriftState,
     plant: PlantState,
     second_mode: TwoModesState,
-    play: PlayState,
     sensor: SensorState,
     signals: Signals,
 }
@@ -342,11 +369,16 @@ impl Stage {
             amplifier: Amplifier::new(&cfg.amplifier, t)?,
             inv_nominal_gain: (1.0 / params::AMP_GAIN) as f32,
             static_gain: cfg.static_gain as f32,
+            hysteresis: cfg.hysteresis,
+            play: cfg.play.as_ref().map(Play::new).transpose()?,
             nonlinear_gain: cfg.nonlinear_gain.as_ref().map(FastGain::new).transpose()?,
             drift: cfg.drift.as_ref().map(|d| Drift::new(d, t)).transpose()?,
             plant: LinearPlant::new(&cfg.plant_config())?,
-            second_mode: cfg.second_mode.as_ref().map(|m| TwoModes::new(&cfg.plant_config(), m)).transpose()?,
-            play: cfg.play.as_ref().map(Play::new).transpose()?,
+            second_mode: cfg
+                .second_mode
+                .as_ref()
+                .map(|m| TwoModes::new(&cfg.plant_config(), m))
+                .transpose()?,
             sensor: Sensor::new(&cfg.sensor)?,
         })
     }
@@ -364,52 +396,96 @@ impl Stage {
     /// The command as the DAC delivers it.
     #[inline]
     fn dac(&self, u_v: f32) -> f32 {
-        if self.dac { DacCode::from_volts(u_v).volts() } else { u_v }
+        if self.dac {
+            DacCode::from_volts(u_v).volts()
+        } else {
+            u_v
+        }
     }
 
-    /// The fast static map for the amplifier output in control-input volts.
+    /// K'(u) times `h`, or `h` without the non-linear gain.
     #[inline]
-    fn fast(&self, ue_v: f32) -> f32 {
-        self.fast_with(ue_v, 0.0)
-    }
-
-    /// The fast static map with the hysteretic offset `hyst_v` added before K'(u).
-    #[inline]
-    fn fast_with(&self, ue_v: f32, hyst_v: f32) -> f32 {
-        let h = self.static_gain * ue_v + hyst_v;
+    fn scale(&self, ue_v: f32, h: f32) -> f32 {
         match &self.nonlinear_gain {
             Some(g) => g.gain(ue_v) * h,
             None => h,
         }
     }
 
-    /// The static displacement, sensor volts, reached with `u_v` held for ever (drift
-    /// settled): what the plant's output settles to (before the sensor).
-    pub fn static_output(&self, u_v: f32) -> f32 {
-        let ue = self.amplifier.static_output(self.dac(u_v)) * self.inv_nominal_gain;
-        let drift = self.drift.as_ref().map_or(0.0, |d| d.output(&d.steady_state(ue)));
-        self.fast(ue) + drift
+    /// The fast static map without hysteresis (`static_gain K'(ue) ue`).
+    #[inline]
+    fn fast_memoryless(&self, ue_v: f32) -> f32 {
+        self.scale(ue_v, self.static_gain * ue_v)
     }
 
-    /// A state at rest with `u_v` held for ever (drift settled, sensor noise from the seed).
+    /// The fast static map for the amplifier output in control-input volts; advances the
+    /// hysteresis memory.
+    #[inline]
+    fn fast(&self, mem: &mut HysteresisMemory, ue_v: f32) -> f32 {
+        match &self.hysteresis {
+            Some(t) => {
+                // A held input (holds, or a slow signal between two DAC codes) changes nothing
+                // in the table's memory: reuse its last output instead of a look-up.
+                let h = if ue_v == mem.input_v() && mem.depth() > 0 {
+                    mem.output_v()
+                } else {
+                    t.forward(mem, ue_v)
+                };
+                self.scale(ue_v, h)
+            }
+            None => self.fast_memoryless(ue_v),
+        }
+    }
+
+    /// The static displacement, sensor volts, reached with `u_v` held for ever (drift
+    /// settled; with hysteresis: on the major rising curve, as after [`Self::steady_state`]):
+    /// what the plant's output settles to (before the sensor).
+    pub fn static_output(&self, u_v: f32) -> f32 {
+        let ue = self.amplifier.static_output(self.dac(u_v)) * self.inv_nominal_gain;
+        let drift = self
+            .drift
+            .as_ref()
+            .map_or(0.0, |d| d.output(&d.steady_state(ue)));
+        let mut mem = HysteresisMemory::new();
+        if let Some(t) = &self.hysteresis {
+            mem.reset(t, ue);
+        }
+        self.fast(&mut mem, ue) + drift
+    }
+
+    /// The hysteresis table, if on.
+    pub fn hysteresis(&self) -> Option<&HysteresisTable> {
+        self.hysteresis.as_ref()
+    }
+
+    /// A state at rest with `u_v` held for ever (drift settled, hysteresis on the major rising
+    /// curve as after coming up from the bottom of its range, sensor noise from the seed).
     pub fn steady_state(&self, u_v: f32) -> StageState {
         let u_v = if u_v.is_finite() { u_v } else { 0.0 };
         let command_v = self.dac(u_v);
         let amplifier = self.amplifier.steady_state(command_v);
         let ue = amplifier.output_v * self.inv_nominal_gain;
-        let drift = self.drift.as_ref().map_or(DriftState::default(), |d| d.steady_state(ue));
-        let fast_v = self.fast(ue);
+        let drift = self
+            .drift
+            .as_ref()
+            .map_or(DriftState::default(), |d| d.steady_state(ue));
+        let mut hysteresis = HysteresisMemory::new();
+        if let Some(t) = &self.hysteresis {
+            hysteresis.reset(t, ue);
+        }
+        let fast_v = self.fast(&mut hysteresis, ue);
         let drift_v = self.drift.as_ref().map_or(0.0, |d| d.output(&drift));
         let d = fast_v + drift_v;
         StageState {
             amplifier,
+            hysteresis,
+            play: self.play.as_ref().map_or(PlayState::default(), |p| p.steady_state(ue)),
             drift,
             plant: self.plant.steady_state(d),
             second_mode: match &self.second_mode {
                 Some(m) => m.steady_state(d),
                 None => TwoModes::idle(),
             },
-            play: self.play.as_ref().map_or(PlayState::default(), |p| p.steady_state(ue)),
             sensor: self.sensor.initial_state(),
             signals: Signals {
                 command_v,
@@ -430,11 +506,10 @@ impl Stage {
         let command_v = self.dac(u_v);
         let amplifier_v = self.amplifier.step(&mut s.amplifier, command_v);
         let ue = amplifier_v * self.inv_nominal_gain;
-        let hyst_v = match &self.play {
-            Some(p) => p.step(&mut s.play, ue),
-            None => 0.0,
-        };
-        let fast_v = self.fast_with(ue, hyst_v);
+        let mut fast_v = self.fast(&mut s.hysteresis, ue);
+        if let Some(p) = &self.play {
+            fast_v += self.scale(ue, p.step(&mut s.play, ue));
+        }
         let drift_v = match &self.drift {
             Some(d) => d.step(&mut s.drift, ue),
             None => 0.0,
@@ -462,9 +537,14 @@ impl Stage {
 /// Per step, with `r` the wanted output (sensor volts):
 /// 1. the drift the model predicts from the commands already sent is `D` (its own copy of the
 ///    drift branch, driven by its own output, so no sensor is needed);
-/// 2. the fast part must supply `r - D`; the command is the inverse of the fast static map
-///    (`0.79 K'(u) u`, strictly increasing by [`FastGainConfig::validate`]) at that value, found
-///    by bisection over the amplifier's input range (32 halvings: bounded, below 1 uV);
+/// 2. the fast part must supply `r - D`; the command is the inverse of the fast static map at
+///    that value:
+///    * without hysteresis, `0.79 K'(u) u` (strictly increasing by [`FastGainConfig::validate`])
+///      is inverted by bisection over `[lo_v, hi_v]` (32 halvings: bounded, below 1 uV);
+///    * with hysteresis, `K'(u) H(u)`: the table's own inverse
+///      ([`HysteresisTable::inverse`], its own memory kept in step) is asked for
+///      `(r - D) / K'(u_last)`, with K' taken at the last command (K' changes by under 1e-5 per
+///      step at 1500 V/ms, so the lag is invisible), then clamped to `[lo_v, hi_v]`;
 /// 3. the drift branch is advanced with that command.
 ///
 /// The drift estimate is one step old when the command is computed (no algebraic loop); its
@@ -476,10 +556,12 @@ pub struct Feedforward {
     hi_v: f32,
 }
 
-/// The feedforward's own drift state.
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
+/// The feedforward's own drift state, hysteresis memory and last command.
+#[derive(Clone, Debug, Default, PartialEq)]
 pub struct FeedforwardState {
     drift: DriftState,
+    hysteresis: HysteresisMemory,
+    last_v: f32,
 }
 
 impl Feedforward {
@@ -489,7 +571,7 @@ impl Feedforward {
         if !(lo_v.is_finite() && hi_v.is_finite()) {
             return Err(ConfigError::NotFinite);
         }
-        if !(lo_v < hi_v) {
+        if lo_v >= hi_v {
             return Err(ConfigError::BadWindow);
         }
         Ok(Self {
@@ -501,25 +583,45 @@ impl Feedforward {
 
     /// The state at rest with `u_v` held.
     pub fn steady_state(&self, u_v: f32) -> FeedforwardState {
+        let mut hysteresis = HysteresisMemory::new();
+        if let Some(t) = &self.stage.hysteresis {
+            hysteresis.reset(t, u_v);
+        }
         FeedforwardState {
-            drift: self.stage.drift.as_ref().map_or(DriftState::default(), |d| d.steady_state(u_v)),
+            hysteresis,
+            last_v: u_v,
+            drift: self
+                .stage
+                .drift
+                .as_ref()
+                .map_or(DriftState::default(), |d| d.steady_state(u_v)),
         }
     }
 
     /// The command for the wanted output `r_v`. A non-finite `r_v` gives `lo_v`.
     #[inline]
     pub fn step(&self, s: &mut FeedforwardState, r_v: f32) -> f32 {
-        let drift_v = self.stage.drift.as_ref().map_or(0.0, |d| d.output(&s.drift));
+        let drift_v = self
+            .stage
+            .drift
+            .as_ref()
+            .map_or(0.0, |d| d.output(&s.drift));
         let want = r_v - drift_v;
         let (mut a, mut b) = (self.lo_v, self.hi_v);
-        let u = if !want.is_finite() || self.stage.fast(a) >= want {
+        let st = &self.stage;
+        let u = if let Some(t) = &st.hysteresis {
+            let k = st.scale(s.last_v, 1.0);
+            let u = t.inverse(&mut s.hysteresis, want / k);
+            // The table clamps to its own range; the window may be narrower.
+            clamp_f32(u, a, b)
+        } else if !want.is_finite() || st.fast_memoryless(a) >= want {
             a
-        } else if self.stage.fast(b) <= want {
+        } else if st.fast_memoryless(b) <= want {
             b
         } else {
             for _ in 0..32 {
                 let m = 0.5 * (a + b);
-                if self.stage.fast(m) < want {
+                if st.fast_memoryless(m) < want {
                     a = m;
                 } else {
                     b = m;
@@ -527,6 +629,7 @@ impl Feedforward {
             }
             0.5 * (a + b)
         };
+        s.last_v = u;
         if let Some(d) = &self.stage.drift {
             d.step(&mut s.drift, u);
         }

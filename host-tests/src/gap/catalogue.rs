@@ -17,7 +17,7 @@
 //! every record by [`model_core::stage::Stage`] (never by a second simulator) and scored.
 
 use crate::model_file::{
-    DelaySection, DriftSection, GainSection, HysteresisSection, ModelFile, PoleSection,
+    DelaySection, DriftSection, GainSection, ModelFile, PlaySection, PoleSection,
     ResonanceSection, SaturationSection, SlewSection,
 };
 use model_core::params;
@@ -59,7 +59,7 @@ pub fn present(m: &ModelFile, effect: &str) -> bool {
         "amplifier-pole" => m.amplifier_pole.is_some(),
         "resonance" => m.resonance.is_some(),
         "drift" => m.drift.is_some(),
-        "hysteresis" => m.hysteresis.is_some(),
+        "hysteresis" => m.hysteresis.is_some() || m.hysteresis_play.is_some(),
         "nonlinear-gain" => m.nonlinear_gain.is_some(),
         "slew-rate-limit" => m.slew_rate_limit.is_some(),
         "saturation" => m.saturation.is_some(),
@@ -82,7 +82,7 @@ pub fn param_count(effect: &str) -> usize {
 pub fn without_slow(m: &ModelFile) -> ModelFile {
     let mut m = m.clone();
     m.drift = None;
-    m.hysteresis = None;
+    m.hysteresis_play = None;
     m.nonlinear_gain = None;
     m
 }
@@ -95,7 +95,10 @@ pub fn without(m: &ModelFile, effect: &str) -> ModelFile {
         "amplifier-pole" => m.amplifier_pole = None,
         "resonance" => m.resonance = None,
         "drift" => m.drift = None,
-        "hysteresis" => m.hysteresis = None,
+        "hysteresis" => {
+            m.hysteresis = None;
+            m.hysteresis_play = None;
+        }
         "nonlinear-gain" => m.nonlinear_gain = None,
         "slew-rate-limit" => m.slew_rate_limit = None,
         "saturation" => m.saturation = None,
@@ -113,7 +116,10 @@ pub fn revert(m: &ModelFile, base: &ModelFile, effect: &str) -> ModelFile {
         "amplifier-pole" => m.amplifier_pole = base.amplifier_pole.clone(),
         "resonance" => m.resonance = base.resonance.clone(),
         "drift" => m.drift = base.drift.clone(),
-        "hysteresis" => m.hysteresis = base.hysteresis.clone(),
+        "hysteresis" => {
+            m.hysteresis = base.hysteresis.clone();
+            m.hysteresis_play = base.hysteresis_play.clone();
+        }
         "nonlinear-gain" => m.nonlinear_gain = base.nonlinear_gain.clone(),
         "slew-rate-limit" => m.slew_rate_limit = base.slew_rate_limit.clone(),
         "saturation" => m.saturation = base.saturation.clone(),
@@ -145,7 +151,7 @@ pub fn params_of(m: &ModelFile, effect: &str) -> Vec<(String, f64)> {
             }
             v
         }),
-        "hysteresis" => m.hysteresis.as_ref().map_or(vec![], |h| {
+        "hysteresis" => m.hysteresis_play.as_ref().map_or(vec![], |h| {
             h.radii_v
                 .iter()
                 .zip(&h.weights)
@@ -263,7 +269,7 @@ pub fn with_slow(m: &ModelFile, p: &SlowParams, u_range: (f64, f64)) -> Option<M
         });
     }
     if let Some(w) = p.hysteresis {
-        m.hysteresis = Some(HysteresisSection {
+        m.hysteresis_play = Some(PlaySection {
             radii_v: params::PLAY_RADII_V,
             weights: w,
         });

@@ -61,13 +61,20 @@ fn bins(t: &[f64], y: &[f64], t0: f64, t1: f64) -> Bins {
         if ti < t0 || ti > t1 {
             continue;
         }
-        let k = if ti <= lo { 0 } else { (((ti / lo).ln() / ratio) * nb as f64) as usize };
+        let k = if ti <= lo {
+            0
+        } else {
+            (((ti / lo).ln() / ratio) * nb as f64) as usize
+        };
         let k = k.min(nb - 1);
         st[k] += ti;
         sy[k] += yi;
         n[k] += 1;
     }
-    let mut b = Bins { t: vec![], y: vec![] };
+    let mut b = Bins {
+        t: vec![],
+        y: vec![],
+    };
     for k in 0..nb {
         if n[k] > 0 {
             b.t.push(st[k] / n[k] as f64);
@@ -80,7 +87,13 @@ fn bins(t: &[f64], y: &[f64], t0: f64, t1: f64) -> Bins {
 /// Least squares for fixed taus: returns (coefficients c, a1..a3, rms).
 fn solve(b: &Bins, taus: &[f64; 3]) -> (Vec<f64>, f64) {
     let m = b.t.len();
-    let a = DMatrix::from_fn(m, 4, |i, j| if j == 0 { 1.0 } else { 1.0 - (-b.t[i] / taus[j - 1]).exp() });
+    let a = DMatrix::from_fn(m, 4, |i, j| {
+        if j == 0 {
+            1.0
+        } else {
+            1.0 - (-b.t[i] / taus[j - 1]).exp()
+        }
+    });
     let y = DVector::from_column_slice(&b.y);
     let svd = a.clone().svd(true, true);
     let x = match svd.solve(&y, 1e-12) {
@@ -89,15 +102,29 @@ fn solve(b: &Bins, taus: &[f64; 3]) -> (Vec<f64>, f64) {
     };
     let r = &a * &x - y;
     let rms = (r.norm_squared() / m as f64).sqrt();
-    (x.iter().copied().collect(), if rms.is_finite() { rms } else { f64::INFINITY })
+    (
+        x.iter().copied().collect(),
+        if rms.is_finite() { rms } else { f64::INFINITY },
+    )
 }
 
 /// Identify the drift lags from a step record; `base` supplies K(u) and the time constants of
 /// lags the record is too short to show.
-pub fn identify_drift(t_s: &[f64], u_v: &[f64], y_v: &[f64], base: &DriftConfig) -> anyhow::Result<DriftFit> {
+pub fn identify_drift(
+    t_s: &[f64],
+    u_v: &[f64],
+    y_v: &[f64],
+    base: &DriftConfig,
+) -> anyhow::Result<DriftFit> {
     let n = t_s.len();
-    ensure!(n == u_v.len() && n == y_v.len(), "columns have different lengths");
-    ensure!(n >= 100, "record too short to identify drift: {n} samples (need at least 100)");
+    ensure!(
+        n == u_v.len() && n == y_v.len(),
+        "columns have different lengths"
+    );
+    ensure!(
+        n >= 100,
+        "record too short to identify drift: {n} samples (need at least 100)"
+    );
     ensure!(
         t_s.iter().chain(u_v).chain(y_v).all(|v| v.is_finite()),
         "record holds non-finite samples"
@@ -107,16 +134,26 @@ pub fn identify_drift(t_s: &[f64], u_v: &[f64], y_v: &[f64], base: &DriftConfig)
         .map(|i| (i, u_v[i] - u_v[i - 1]))
         .max_by(|a, b| a.1.abs().total_cmp(&b.1.abs()))
         .unwrap_or((1, 0.0));
-    ensure!(jump.abs() >= 0.2, "no step found: the largest jump of u is {:.3} V (need >= 0.2 V)", jump.abs());
+    ensure!(
+        jump.abs() >= 0.2,
+        "no step found: the largest jump of u is {:.3} V (need >= 0.2 V)",
+        jump.abs()
+    );
     let tol = 0.01 * jump.abs();
     let u1 = u_v[k];
     let end = (k..n).find(|&i| (u_v[i] - u1).abs() > tol).unwrap_or(n);
-    let start = (0..k).rev().find(|&i| (u_v[i] - u_v[k - 1]).abs() > tol).map_or(0, |i| i + 1);
+    let start = (0..k)
+        .rev()
+        .find(|&i| (u_v[i] - u_v[k - 1]).abs() > tol)
+        .map_or(0, |i| i + 1);
     let from_v = u_v[start..k].iter().sum::<f64>() / (k - start) as f64;
     let to_v = u_v[k..end].iter().sum::<f64>() / (end - k) as f64;
     let t_step = t_s[k];
     let fitted_s = t_s[end - 1] - t_step;
-    ensure!(fitted_s >= 0.2, "the input is held for only {fitted_s:.3} s after the step (need >= 0.2 s)");
+    ensure!(
+        fitted_s >= 0.2,
+        "the input is held for only {fitted_s:.3} s after the step (need >= 0.2 s)"
+    );
     // 2. Bins of the drift stretch, time measured from the step.
     let rel: Vec<f64> = t_s[k..end].iter().map(|t| t - t_step).collect();
     let b = bins(&rel, &y_v[k..end], 0.01, fitted_s);
@@ -165,7 +202,8 @@ pub fn identify_drift(t_s: &[f64], u_v: &[f64], y_v: &[f64], base: &DriftConfig)
                 for dir in [-1.0, 1.0] {
                     let mut taus = best.1;
                     taus[i] *= (dir * step).exp();
-                    if !(taus[0] < taus[1] && taus[1] < taus[2]) || taus[0] < 1e-3 || taus[2] > 1e4 {
+                    if !(taus[0] < taus[1] && taus[1] < taus[2]) || taus[0] < 1e-3 || taus[2] > 1e4
+                    {
                         continue;
                     }
                     let (_, rms) = solve(&b, &taus);
@@ -188,9 +226,12 @@ pub fn identify_drift(t_s: &[f64], u_v: &[f64], y_v: &[f64], base: &DriftConfig)
         taus_s: best.1,
         ..*base
     };
-    config
-        .validate()
-        .map_err(|e| anyhow::anyhow!("the identified drift is not a valid model ({e}): gains {gains:?}, taus {:?}", best.1))?;
+    config.validate().map_err(|e| {
+        anyhow::anyhow!(
+            "the identified drift is not a valid model ({e}): gains {gains:?}, taus {:?}",
+            best.1
+        )
+    })?;
     Ok(DriftFit {
         config,
         from_v,

@@ -1,5 +1,9 @@
-//! Identification of the stage's non-linear blocks from measured-style records.
+//! Identification of the non-linear stage blocks from measured-style records (issue #4
+//! item 6). Design-time `f64`; each function returns the model-core configuration it fills.
 //!
 //! * [`drift`]: the three drift lags (eq. 5.1) from a step record.
+//! * [`hysteresis`]: the Everett table from a first-order-reversal-curve record (sec. 5.3.4),
+//!   and the generator of that protocol's input.
 
 pub mod drift;
+pub mod hysteresis;

@@ -27,8 +27,8 @@ impl AmplifierRef {
     /// The settled output for a held input.
     pub fn target(&self, u_v: f64) -> f64 {
         if self.saturation {
-            let u = u_v.max(params::AMP_INPUT_MIN_V).min(params::AMP_INPUT_MAX_V);
-            (params::AMP_GAIN * u).max(params::AMP_OUTPUT_MIN_V).min(params::AMP_OUTPUT_MAX_V)
+            let u = u_v.clamp(params::AMP_INPUT_MIN_V, params::AMP_INPUT_MAX_V);
+            (params::AMP_GAIN * u).clamp(params::AMP_OUTPUT_MIN_V, params::AMP_OUTPUT_MAX_V)
         } else {
             params::AMP_GAIN * u_v
         }

@@ -7,7 +7,10 @@ use model_core::params;
 /// K(u) of eq. 5.3 in plain powers, the argument held to 0..6 V (the range our model
 /// evaluates it on).
 pub fn k_drift(u_v: f64) -> f64 {
-    let x = u_v.clamp(params::DRIFT_POLY_U_RANGE_V.0, params::DRIFT_POLY_U_RANGE_V.1);
+    let x = u_v.clamp(
+        params::DRIFT_POLY_U_RANGE_V.0,
+        params::DRIFT_POLY_U_RANGE_V.1,
+    );
     let c = params::DRIFT_POLY;
     c[3] * x.powi(3) + c[2] * x.powi(2) + c[1] * x + c[0]
 }

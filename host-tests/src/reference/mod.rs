@@ -2,9 +2,10 @@
 //! written from the continuous equations again, in another form, so that an error in one is
 //! not repeated in the other.
 
-pub mod lag;
-pub mod hysteresis_truth;
 pub mod amplifier;
 pub mod drift;
 pub mod gain;
+pub mod hysteresis_truth;
+pub mod lag;
+pub mod prefilter;
 pub mod stage;

@@ -84,7 +84,11 @@ impl StageRef {
     }
 
     fn fast(&self, ue: f64) -> f64 {
-        if self.sw.nonlinear_gain { fast_output(ue) } else { params::PLANT_GAIN * ue }
+        if self.sw.nonlinear_gain {
+            fast_output(ue)
+        } else {
+            params::PLANT_GAIN * ue
+        }
     }
 
     fn deriv(&self, s: &[f64; 5], d: f64) -> [f64; 5] {
@@ -124,14 +128,22 @@ impl StageRef {
                 self.line.pop_front();
             }
             let s = self.s;
-            let add = |a: &[f64; 5], k: &[f64; 5], f: f64| -> [f64; 5] { std::array::from_fn(|i| a[i] + f * k[i]) };
+            let add = |a: &[f64; 5], k: &[f64; 5], f: f64| -> [f64; 5] {
+                std::array::from_fn(|i| a[i] + f * k[i])
+            };
             let k1 = self.deriv(&s, din);
             let k2 = self.deriv(&add(&s, &k1, h / 2.0), din);
             let k3 = self.deriv(&add(&s, &k2, h / 2.0), din);
             let k4 = self.deriv(&add(&s, &k3, h), din);
-            self.s = std::array::from_fn(|i| s[i] + h / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i]));
+            self.s = std::array::from_fn(|i| {
+                s[i] + h / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i])
+            });
         }
-        if self.sw.second_mode.is_some() { self.s[3] } else { self.s[1] }
+        if self.sw.second_mode.is_some() {
+            self.s[3]
+        } else {
+            self.s[1]
+        }
     }
 
     /// The amplifier output, volts.

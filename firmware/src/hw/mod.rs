@@ -1,0 +1,145 @@
+//! Everything that touches registers: built for thumbv7em-none-eabihf only.
+//!
+//! Bring-up order (the output must hold the safe value from the first instant):
+//! 1. clocks, caches, DWT cycle counter;
+//! 2. DAC: configured and loaded with the safe code (output-enable switch still open);
+//! 3. controller built from the default settings, interrupt context installed;
+//! 4. ADC armed on the TIM2 trigger, interrupt priorities set (control highest), TIM2 started;
+//! 5. output-enable switch closed once the loop runs; tasks spawned; IWDG started.
+//!
+//! If the IWDG reset the chip, the WATCHDOG fault is raised at boot: the controller stays in
+//! safe until `clear`.
+
+mod adc;
+mod board;
+mod control;
+mod dac;
+mod shared;
+mod tasks;
+mod timer;
+
+use core::sync::atomic::Ordering;
+
+use cortex_m::peripheral::DWT;
+use defmt_rtt as _;
+use embassy_executor::Spawner;
+use embassy_stm32::gpio::{Level, Output, Speed};
+use embassy_stm32::interrupt::InterruptExt;
+use embassy_stm32::usart::{self, BufferedUart};
+use embassy_stm32::wdg::IndependentWatchdog;
+use embassy_stm32::{bind_interrupts, interrupt, pac, peripherals};
+use embassy_time::Timer;
+use firmware::sample::LoopCore;
+use firmware::scaling::TimerSetting;
+use firmware::stats::CycleStats;
+use model_core::{DacCode, params};
+use panic_probe as _;
+use static_cell::StaticCell;
+
+use firmware::settings::Settings;
+use model_core::controller::{ControllerState, Faults};
+
+bind_interrupts!(struct Irqs {
+    USART3 => usart::BufferedInterruptHandler<peripherals::USART3>;
+});
+
+static UART_TX: StaticCell<[u8; 2048]> = StaticCell::new();
+static UART_RX: StaticCell<[u8; 256]> = StaticCell::new();
+
+#[embassy_executor::main]
+async fn main(spawner: Spawner) {
+    let p = embassy_stm32::init(board::config());
+    // Was the last reset the watchdog's? (RCC_RSR, cleared by RMVF.)
+    let iwdg_reset = pac::RCC.rsr().read().iwdg1rstf();
+    pac::RCC.rsr().modify(|w| w.set_rmvf(true));
+
+    let mut cp = cortex_m::Peripherals::take().expect("core peripherals are taken once, here");
+    cp.SCB.enable_icache();
+    // No DMA is used, so the data cache needs no maintenance.
+    cp.SCB.enable_dcache(&mut cp.CPUID);
+    cp.DCB.enable_trace();
+    DWT::unlock();
+    cp.DWT.enable_cycle_counter();
+
+    // The embassy time driver's interrupt must stay below the control interrupt.
+    interrupt::TIM3.set_priority(board::PRIO_TIME);
+
+    let settings = Settings::default();
+    let setting = match TimerSetting::for_rate(board::TIMER_CLOCK_HZ, settings.rate_hz, 32) {
+        Ok(t) => t,
+        Err(_) => defmt::panic!("the default rate is reachable"),
+    };
+    let config = match settings.loop_config() {
+        Ok(c) => c,
+        Err(_) => defmt::panic!("the default configuration is valid"),
+    };
+
+    // 2. The DAC holds the safe value before anything else runs.
+    let safe = DacCode::from_volts(config.controller.safe_v());
+    #[cfg(not(feature = "internal-dac"))]
+    let dac = dac::Dac::new(p.SPI1, p.PA5, p.PB5, p.PD14, safe);
+    #[cfg(feature = "internal-dac")]
+    let dac = dac::Dac::new(p.DAC1, p.PA4, safe);
+    let mut output_enable = Output::new(p.PD15, Level::Low, Speed::Low);
+
+    // 3. The interrupt's context.
+    let mut state = ControllerState::new(&config.controller);
+    if iwdg_reset {
+        state.raise(Faults::WATCHDOG);
+    }
+    let Some(producer) = shared::CAPTURE.producer() else {
+        defmt::panic!("the capture producer is taken once")
+    };
+    let Some(consumer) = shared::CAPTURE.consumer() else {
+        defmt::panic!("the capture consumer is taken once")
+    };
+    tasks::apply_rate_limits(setting.rate_hz);
+    control::install(control::LoopContext {
+        core: LoopCore {
+            config,
+            state,
+            stats: CycleStats::new(shared::BUDGET_CYCLES.load(Ordering::Relaxed)),
+            capture: producer,
+        },
+        dac,
+    });
+
+    // 4. ADC on the timer's trigger; the control interrupt at the highest priority.
+    adc::init(p.ADC1, p.PA3);
+    timer::init(p.TIM2, &setting);
+    interrupt::ADC.set_priority(board::PRIO_CONTROL);
+    // SAFETY: the handler's context is installed above and everything it shares with the
+    // tasks is atomic or behind the mailbox; enabling it cannot break a critical section.
+    unsafe { interrupt::ADC.enable() };
+    timer::start();
+
+    // 5. The command link, the LEDs, the watchdog.
+    // Before the driver enables the interrupt (its NVIC default would be P0, the highest).
+    interrupt::USART3.set_priority(board::PRIO_UART);
+    let mut ucfg = usart::Config::default();
+    ucfg.baudrate = params::FW_UART_BAUD;
+    let uart = match BufferedUart::new(
+        p.USART3,
+        p.PD9,
+        p.PD8,
+        UART_TX.init([0; 2048]),
+        UART_RX.init([0; 256]),
+        Irqs,
+        ucfg,
+    ) {
+        Ok(u) => u,
+        Err(_) => defmt::panic!("USART3 configuration"),
+    };
+
+    Timer::after_millis(10).await;
+    output_enable.set_high();
+    core::mem::forget(output_enable); // stays high; the reset state (input, pulled down) opens it
+
+    let iwdg = IndependentWatchdog::new(p.IWDG1, (params::FW_IWDG_TIMEOUT_S * 1e6) as u32);
+    let led = Output::new(p.PB0, Level::Low, Speed::Low);
+    let fault_led = Output::new(p.PB14, Level::Low, Speed::Low);
+    defmt::info!("loop running at {} Hz", setting.rate_hz);
+    spawner.spawn(tasks::command_task(uart, settings, consumer).expect("spawn command task"));
+    spawner.spawn(tasks::heartbeat_task(led, fault_led).expect("spawn heartbeat task"));
+    spawner.spawn(tasks::supervisor_task(iwdg).expect("spawn supervisor task"));
+}

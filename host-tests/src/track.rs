@@ -1,0 +1,408 @@
+//! `piezo track`: how well the loop follows a periodic reference, with feedback alone, with
+//! trajectory planning only, or with the full pre-filter (issue #3, sec. 4.1.2.4).
+//!
+//! # Simulation
+//! model-core all the way: [`ReferenceGenerator`] (with the preview the pre-filter asks for)
+//! -> [`PreFilter`] -> the closed loop of [`LoopSim`] (Tustin lag compensator, output limits,
+//! 14-bit DAC, plant of eq. 4.4 with its 85 us delay, 16-bit ADC, seeded Gaussian sensor
+//! noise of 1 mV by default) at 50 kHz. The tracking error is the generator's present value
+//! minus the true plant output (not the noisy measurement). After a warm-up of at least
+//! 0.2 s and 3 periods (the periodic steady state; the slow lag modes are settled out by
+//! starting the loop at rest at the first reference value), the figures are taken over whole
+//! periods: at least 0.1 s and 2 periods.
+use crate::sim::LoopSim;
+use anyhow::{Context, bail};
+use clap::{Args, ValueEnum};
+use model_core::lag::LagConfig;
+use model_core::limits::Flags;
+use model_core::params;
+use model_core::plant::LinearPlantConfig;
+use model_core::prefilter::{DelayHandling, PreFilter, PreFilterConfig, PreFilterMode};
+use model_core::reference::{ReferenceConfig, ReferenceGenerator, Shape};
+
+/// Shapes `piezo track` offers.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum TrackShape {
+    /// `offset + amplitude sin(2 pi f t)`.
+    Sine,
+    /// Triangle between `offset - amplitude` and `offset + amplitude`.
+    Triangle,
+    /// Periodic steps (square wave) between `offset - amplitude` and `offset + amplitude`.
+    Step,
+}
+
+/// Pre-filter setting of `piezo track`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum PrefilterArg {
+    /// Feedback alone.
+    Off,
+    /// Reference through `1/(tau s + 1)^4` (with its preview).
+    Planning,
+    /// The full pre-filter `H'`.
+    On,
+}
+
+impl PrefilterArg {
+    fn mode(self) -> PreFilterMode {
+        match self {
+            Self::Off => PreFilterMode::Off,
+            Self::Planning => PreFilterMode::Planning,
+            Self::On => PreFilterMode::Full,
+        }
+    }
+}
+
+/// One tracking experiment.
+#[derive(Clone, Copy, Debug)]
+pub struct TrackSpec {
+    /// Reference shape.
+    pub shape: TrackShape,
+    /// Frequency, Hz.
+    pub freq_hz: f64,
+    /// Peak amplitude (half of peak-to-peak), volts.
+    pub amplitude_v: f64,
+    /// Offset, volts.
+    pub offset_v: f64,
+    /// Pre-filter configuration.
+    pub prefilter: PreFilterConfig,
+    /// Sensor noise, volts (1 sigma).
+    pub noise_v: f64,
+    /// Noise seed.
+    pub seed: u64,
+    /// Compensator.
+    pub lag: LagConfig,
+    /// Plant.
+    pub plant: LinearPlantConfig,
+}
+
+impl TrackSpec {
+    /// The thesis loop at 50 kHz with 1 mV of sensor noise.
+    pub fn new(
+        shape: TrackShape,
+        freq_hz: f64,
+        amplitude_v: f64,
+        offset_v: f64,
+        mode: PreFilterMode,
+    ) -> Self {
+        Self {
+            shape,
+            freq_hz,
+            amplitude_v,
+            offset_v,
+            prefilter: PreFilterConfig {
+                mode,
+                ..PreFilterConfig::default()
+            },
+            noise_v: params::TRACK_NOISE_V,
+            seed: 1,
+            lag: LagConfig::default(),
+            plant: LinearPlantConfig::default(),
+        }
+    }
+
+    /// The same with another tau.
+    pub fn with_tau(mut self, tau_s: f64) -> Self {
+        self.prefilter.tau_s = tau_s;
+        self
+    }
+
+    /// The same with another delay handling.
+    pub fn with_delay(mut self, delay: DelayHandling) -> Self {
+        self.prefilter.delay = delay;
+        self
+    }
+}
+
+/// What `piezo track --json` prints.
+#[derive(Clone, Copy, Debug, serde::Serialize)]
+pub struct TrackFigures {
+    /// RMS of reference minus output over whole periods, volts.
+    pub rms_error_v: f64,
+    /// Largest |reference - output|, volts.
+    pub max_error_v: f64,
+    /// Largest change of the DAC command between samples, V/ms.
+    pub max_slew_v_per_ms: f64,
+    /// Fraction of samples whose command the window clamped.
+    pub dac_saturated_fraction: f64,
+}
+
+/// Everything measured, with what the JSON leaves out.
+#[derive(Clone, Debug)]
+pub struct TrackRun {
+    /// The contract figures.
+    pub figures: TrackFigures,
+    /// Fraction of samples the slew limit held back.
+    pub slew_limited_fraction: f64,
+    /// Lowest and highest DAC command, volts.
+    pub command_range_v: (f64, f64),
+    /// Preview used, samples.
+    pub preview_samples: u32,
+    /// Recorded (time s, reference V, output V, command V) over the measured periods.
+    pub trace: Vec<(f64, f64, f64, f64)>,
+}
+
+/// Checks the experiment; every refusal says why.
+pub fn validate(spec: &TrackSpec) -> anyhow::Result<()> {
+    let t = spec.lag.period_s;
+    for (name, v) in [
+        ("--freq", spec.freq_hz),
+        ("--amplitude", spec.amplitude_v),
+        ("--offset", spec.offset_v),
+        ("--tau", spec.prefilter.tau_s),
+    ] {
+        if !v.is_finite() {
+            bail!("{name} must be a finite number, got {v}");
+        }
+    }
+    let nyquist = 0.5 / t;
+    if !(spec.freq_hz > 0.0 && spec.freq_hz < nyquist) {
+        bail!(
+            "--freq must be above 0 and below the Nyquist rate {nyquist} Hz, got {}",
+            spec.freq_hz
+        );
+    }
+    if spec.freq_hz < 1.0 {
+        bail!(
+            "--freq below 1 Hz would need minutes of simulation; got {}",
+            spec.freq_hz
+        );
+    }
+    if spec.amplitude_v < 0.0 {
+        bail!(
+            "--amplitude is a peak value and must not be negative, got {}",
+            spec.amplitude_v
+        );
+    }
+    let (lo, hi) = (
+        spec.offset_v - spec.amplitude_v,
+        spec.offset_v + spec.amplitude_v,
+    );
+    if lo < params::SENSOR_MIN_V || hi > params::SENSOR_MAX_V {
+        bail!(
+            "the reference spans {lo}..{hi} V, outside the sensor range {}..{} V",
+            params::SENSOR_MIN_V,
+            params::SENSOR_MAX_V
+        );
+    }
+    if !(spec.noise_v.is_finite() && spec.noise_v >= 0.0) {
+        bail!("the noise must be a finite non-negative number of volts");
+    }
+    PreFilter::new(&spec.lag, &spec.plant, &spec.prefilter).map_err(|e| {
+        anyhow::anyhow!(
+            "invalid pre-filter (tau {} s, allowed {}..{} s): {e}",
+            spec.prefilter.tau_s,
+            params::PREFILTER_TAU_MIN_S,
+            params::PREFILTER_TAU_MAX_S
+        )
+    })?;
+    Ok(())
+}
+
+/// Run one experiment; `record` keeps the trace of the measured periods.
+pub fn simulate(spec: &TrackSpec, record: bool) -> anyhow::Result<TrackRun> {
+    validate(spec)?;
+    let t = spec.lag.period_s;
+    let pf = PreFilter::new(&spec.lag, &spec.plant, &spec.prefilter)
+        .map_err(|e| anyhow::anyhow!("{e}"))?;
+    let shape = match spec.shape {
+        TrackShape::Sine => Shape::Sine,
+        TrackShape::Triangle => Shape::Triangle,
+        TrackShape::Step => Shape::Square,
+    };
+    let rc = ReferenceConfig {
+        shape,
+        offset_v: spec.offset_v,
+        amplitude_v: spec.amplitude_v,
+        freq_hz: spec.freq_hz,
+        period_s: t,
+    };
+    let gen_ =
+        ReferenceGenerator::new(&rc, pf.preview_samples()).map_err(|e| anyhow::anyhow!("{e}"))?;
+    let mut gs = gen_.start();
+    let mut sim = LoopSim::new(&spec.lag, &spec.plant)
+        .map_err(|e| anyhow::anyhow!("{e}"))?
+        .with_noise(spec.noise_v, spec.seed);
+    let r0 = gen_.now(&gs);
+    sim.settle_at(r0 as f64);
+    let mut ps = pf.settled_state(r0);
+    let period_samples = 1.0 / (spec.freq_hz * t);
+    let warm_periods = (0.2 * spec.freq_hz).ceil().max(3.0);
+    let meas_periods = (0.1 * spec.freq_hz).ceil().max(2.0);
+    let warm = (warm_periods * period_samples).round() as usize;
+    let n = (meas_periods * period_samples).round() as usize;
+    let (mut sum2, mut max_e, mut max_du) = (0.0f64, 0.0f64, 0.0f64);
+    let (mut clamped, mut slewed) = (0usize, 0usize);
+    let (mut u_lo, mut u_hi) = (f64::MAX, f64::MIN);
+    let mut u_prev = sim.lag_state.output_v() as f64;
+    let mut trace = Vec::new();
+    for k in 0..warm + n {
+        let r_now = gen_.now(&gs) as f64;
+        let r_ahead = gen_.next(&mut gs);
+        let v = pf.step(&mut ps, r_ahead);
+        let s = sim.step(v as f64);
+        let u = sim.lag_state.output_v() as f64;
+        if k >= warm {
+            let e = r_now - s.output_v;
+            sum2 += e * e;
+            max_e = max_e.max(e.abs());
+            max_du = max_du.max((u - u_prev).abs());
+            u_lo = u_lo.min(u);
+            u_hi = u_hi.max(u);
+            clamped += s.flags.contains(Flags::CLAMPED) as usize;
+            slewed += s.flags.contains(Flags::SLEW_LIMITED) as usize;
+            if record {
+                trace.push((k as f64 * t, r_now, s.output_v, s.command_v));
+            }
+        }
+        u_prev = u;
+    }
+    let nf = n.max(1) as f64;
+    Ok(TrackRun {
+        figures: TrackFigures {
+            rms_error_v: (sum2 / nf).sqrt(),
+            max_error_v: max_e,
+            max_slew_v_per_ms: max_du / t * 1e-3,
+            dac_saturated_fraction: clamped as f64 / nf,
+        },
+        slew_limited_fraction: slewed as f64 / nf,
+        command_range_v: (u_lo, u_hi),
+        preview_samples: pf.preview_samples(),
+        trace,
+    })
+}
+
+/// Draw reference, output (top) and error (bottom) of a recorded trace to an SVG file.
+pub fn plot(
+    tr: &[(f64, f64, f64, f64)],
+    title: &str,
+    path: &std::path::Path,
+) -> anyhow::Result<()> {
+    use plotters::prelude::*;
+    if tr.is_empty() {
+        bail!("nothing recorded to plot");
+    }
+    let t0 = tr[0].0;
+    let ms = |t: f64| (t - t0) * 1e3;
+    let t_end = ms(tr[tr.len() - 1].0).max(1e-6);
+    let (y_lo, y_hi) = tr.iter().fold((f64::MAX, f64::MIN), |(a, b), s| {
+        (a.min(s.1).min(s.2), b.max(s.1).max(s.2))
+    });
+    let e_max = tr.iter().map(|s| (s.1 - s.2).abs()).fold(1e-6, f64::max) * 1e3;
+    let root = SVGBackend::new(path, (1000, 700)).into_drawing_area();
+    root.fill(&WHITE)?;
+    let (top, bottom) = root.split_vertically(420);
+    let mut c = ChartBuilder::on(&top)
+        .caption(title, ("sans-serif", 20))
+        .margin(10)
+        .x_label_area_size(30)
+        .y_label_area_size(60)
+        .build_cartesian_2d(0.0..t_end, (y_lo - 0.2)..(y_hi + 0.2))?;
+    c.configure_mesh()
+        .x_desc("time, ms")
+        .y_desc("sensor, V")
+        .draw()?;
+    c.draw_series(LineSeries::new(tr.iter().map(|s| (ms(s.0), s.1)), &BLUE))?
+        .label("reference")
+        .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], BLUE));
+    c.draw_series(LineSeries::new(tr.iter().map(|s| (ms(s.0), s.2)), &RED))?
+        .label("output")
+        .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], RED));
+    c.configure_series_labels()
+        .background_style(WHITE)
+        .border_style(BLACK)
+        .draw()?;
+    let mut c2 = ChartBuilder::on(&bottom)
+        .margin(10)
+        .x_label_area_size(30)
+        .y_label_area_size(60)
+        .build_cartesian_2d(0.0..t_end, -e_max * 1.1..e_max * 1.1)?;
+    c2.configure_mesh()
+        .x_desc("time, ms")
+        .y_desc("error, mV")
+        .draw()?;
+    c2.draw_series(LineSeries::new(
+        tr.iter().map(|s| (ms(s.0), (s.1 - s.2) * 1e3)),
+        &BLACK,
+    ))?;
+    root.present().context("writing the SVG")?;
+    Ok(())
+}
+
+/// Arguments of `piezo track`.
+#[derive(Args, Debug)]
+pub struct TrackArgs {
+    /// Reference shape.
+    #[arg(long, value_enum, default_value_t = TrackShape::Sine)]
+    pub shape: TrackShape,
+    /// Frequency, Hz.
+    #[arg(long, default_value_t = 100.0, allow_negative_numbers = true)]
+    pub freq: f64,
+    /// Peak amplitude (half of peak-to-peak), sensor volts.
+    #[arg(long, default_value_t = 3.0, allow_negative_numbers = true)]
+    pub amplitude: f64,
+    /// Offset, sensor volts.
+    #[arg(long, default_value_t = 4.0, allow_negative_numbers = true)]
+    pub offset: f64,
+    /// Pre-filter: off (feedback alone), planning, on (full pre-filter).
+    #[arg(long, value_enum, default_value_t = PrefilterArg::On)]
+    pub prefilter: PrefilterArg,
+    /// Time constant of the four planning poles, seconds.
+    #[arg(long, default_value_t = params::PREFILTER_TAU_S, allow_negative_numbers = true)]
+    pub tau: f64,
+    /// Print one JSON object instead of a table.
+    #[arg(long)]
+    pub json: bool,
+    /// Draw reference, output and error of the measured periods to this SVG file.
+    #[arg(long)]
+    pub plot: Option<std::path::PathBuf>,
+}
+
+/// Run `piezo track`.
+pub fn run(a: &TrackArgs) -> anyhow::Result<()> {
+    let spec =
+        TrackSpec::new(a.shape, a.freq, a.amplitude, a.offset, a.prefilter.mode()).with_tau(a.tau);
+    let r = simulate(&spec, a.plot.is_some())?;
+    if let Some(path) = &a.plot {
+        // The last two periods of the measured ones.
+        let keep = ((2.0 / (a.freq * spec.lag.period_s)).ceil() as usize).min(r.trace.len());
+        let title = format!(
+            "{:?} {} Hz, {} V peak, pre-filter {:?}: last two periods",
+            a.shape, a.freq, a.amplitude, a.prefilter
+        );
+        plot(&r.trace[r.trace.len() - keep..], &title, path)?;
+    }
+    let f = r.figures;
+    if a.json {
+        println!("{}", serde_json::to_string(&f)?);
+        return Ok(());
+    }
+    println!(
+        "{:?} {} Hz, {} V peak around {} V, pre-filter {:?} (tau {} us, preview {} samples)",
+        a.shape,
+        a.freq,
+        a.amplitude,
+        a.offset,
+        a.prefilter,
+        a.tau * 1e6,
+        r.preview_samples
+    );
+    println!("{:<28}{:>14.3} mV", "RMS error", f.rms_error_v * 1e3);
+    println!("{:<28}{:>14.3} mV", "peak error", f.max_error_v * 1e3);
+    println!(
+        "{:<28}{:>14.3} V/ms",
+        "largest command slew", f.max_slew_v_per_ms
+    );
+    println!(
+        "{:<28}{:>14.4}",
+        "window-clamped fraction", f.dac_saturated_fraction
+    );
+    println!(
+        "{:<28}{:>14.4}",
+        "slew-limited fraction", r.slew_limited_fraction
+    );
+    println!(
+        "{:<28}{:>8.3} .. {:.3} V",
+        "command range", r.command_range_v.0, r.command_range_v.1
+    );
+    Ok(())
+}
