@@ -348,7 +348,11 @@ fn hidden_effects_are_named() {
     if release {
         assert!(acc >= 0.95, "accuracy {:.1} % below 95 %", 100.0 * acc);
     } else {
-        assert!(acc >= 0.75, "accuracy {:.1} % on the small debug sample", 100.0 * acc);
+        assert!(
+            acc >= 0.75,
+            "accuracy {:.1} % on the small debug sample",
+            100.0 * acc
+        );
     }
     // Every correctly named effect should cut the residual of the record that shows it >= 5x
     // or bring it within 1.5x of the floor. Measured: all but one (a second mode under a
@@ -364,7 +368,10 @@ fn hidden_effects_are_named() {
         correct - cut_fail.len(),
         100.0 * cut_ok
     );
-    assert!(cut_ok >= 0.98, "effects that did not cut the residual enough: {cut_fail:?}");
+    assert!(
+        cut_ok >= 0.98,
+        "effects that did not cut the residual enough: {cut_fail:?}"
+    );
 }
 
 // ----- bad input -----
@@ -413,7 +420,10 @@ fn bad_records_give_clear_errors() {
         text.push_str(&format!("{},{},{}\n", i as f64 * 1e-3, i as f64 * 0.1, 0.0));
     }
     let p = write_tmp("short.csv", text.as_bytes());
-    let msg = format!("{:#}", gap::load_data(std::slice::from_ref(&p), None).unwrap_err());
+    let msg = format!(
+        "{:#}",
+        gap::load_data(std::slice::from_ref(&p), None).unwrap_err()
+    );
     println!("short: {msg}");
     assert!(msg.contains("too short"));
     let _ = std::fs::remove_file(p);
@@ -423,7 +433,10 @@ fn bad_records_give_clear_errors() {
         text.push_str(&format!("{},1.0,0.79\n", i as f64 * 1e-3));
     }
     let p = write_tmp("flat.csv", text.as_bytes());
-    let msg = format!("{:#}", gap::load_data(std::slice::from_ref(&p), None).unwrap_err());
+    let msg = format!(
+        "{:#}",
+        gap::load_data(std::slice::from_ref(&p), None).unwrap_err()
+    );
     println!("flat: {msg}");
     assert!(msg.contains("never moves"));
     let _ = std::fs::remove_file(p);

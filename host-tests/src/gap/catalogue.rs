@@ -17,8 +17,8 @@
 //! every record by [`model_core::stage::Stage`] (never by a second simulator) and scored.
 
 use crate::model_file::{
-    DelaySection, DriftSection, GainSection, ModelFile, PlaySection, PoleSection,
-    ResonanceSection, SaturationSection, SlewSection,
+    DelaySection, DriftSection, GainSection, ModelFile, PlaySection, PoleSection, ResonanceSection,
+    SaturationSection, SlewSection,
 };
 use model_core::params;
 
