@@ -305,10 +305,14 @@ pub struct ModelFile {
     /// `saturation`.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub saturation: Option<SaturationSection>,
-    /// `hysteresis` (last: its grid is long).
     /// `hysteresis` in the fitted play form.
-    #[serde(rename = "hysteresis-play", default, skip_serializing_if = "Option::is_none")]
+    #[serde(
+        rename = "hysteresis-play",
+        default,
+        skip_serializing_if = "Option::is_none"
+    )]
     pub hysteresis_play: Option<PlaySection>,
+    /// `hysteresis` (last: its grid is long).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub hysteresis: Option<HysteresisSection>,
 }
@@ -435,10 +439,13 @@ impl ModelFile {
         Ok(StageConfig {
             period_s: self.period_s,
             hysteresis,
-            play: self.hysteresis_play.as_ref().map(|h| model_core::play::PlayConfig {
-                radii_v: h.radii_v,
-                weights: h.weights,
-            }),
+            play: self
+                .hysteresis_play
+                .as_ref()
+                .map(|h| model_core::play::PlayConfig {
+                    radii_v: h.radii_v,
+                    weights: h.weights,
+                }),
             dac: self.converters.dac,
             amplifier: AmplifierConfig {
                 gain: self.amplifier.gain,

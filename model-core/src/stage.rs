@@ -68,13 +68,13 @@ use crate::discretize::zoh_delayed;
 use crate::drift::{Drift, DriftConfig, DriftState};
 use crate::gain::{FastGain, FastGainConfig};
 use crate::hysteresis::{HysteresisMemory, HysteresisTable};
-use crate::play::{Play, PlayConfig, PlayState};
 use crate::limits::clamp_f32;
 use crate::limits::{ConfigError, check_period};
 use crate::params;
 use crate::plant::{
     LinearPlant, LinearPlantConfig, MAX_DELAY_SAMPLES, PlantState, continuous_state_space,
 };
+use crate::play::{Play, PlayConfig, PlayState};
 use crate::sensor::{Sensor, SensorConfig, SensorState};
 use core::f64::consts::PI;
 
@@ -479,7 +479,10 @@ impl Stage {
         StageState {
             amplifier,
             hysteresis,
-            play: self.play.as_ref().map_or(PlayState::default(), |p| p.steady_state(ue)),
+            play: self
+                .play
+                .as_ref()
+                .map_or(PlayState::default(), |p| p.steady_state(ue)),
             drift,
             plant: self.plant.steady_state(d),
             second_mode: match &self.second_mode {
