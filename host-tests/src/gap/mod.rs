@@ -1099,12 +1099,13 @@ fn fit_slow(
                 } else {
                     grid[N_TAU - 1] * 2.0
                 };
-                if !(lo < hi) {
+                // Also skips NaN bounds.
+                if lo.partial_cmp(&hi) != Some(std::cmp::Ordering::Less) {
                     continue;
                 }
                 let a = lo.max(taus[m] / 3.0).ln();
                 let b = hi.min(taus[m] * 3.0).ln();
-                if !(a < b) {
+                if a.partial_cmp(&b) != Some(std::cmp::Ordering::Less) {
                     continue;
                 }
                 let cur = taus;
