@@ -176,7 +176,9 @@ pub fn input(a: &SynthArgs, t_s: &[f64]) -> anyhow::Result<Vec<f64>> {
                 .map(|&t| o + amp * 0.5 * (1.0 - (2.0 * PI * (f * t + 0.5 * k * t * t)).cos()))
                 .collect()
         }
-        Protocol::Identification => bail!("the identification protocol writes two records (see crate::gap::protocol)"),
+        Protocol::Identification => {
+            bail!("the identification protocol writes two records (see crate::gap::protocol)")
+        }
         Protocol::Forc => bail!("the forc protocol defines its own sample times"),
     })
 }
