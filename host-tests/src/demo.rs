@@ -56,7 +56,10 @@ pub fn run(a: &DemoArgs) -> anyhow::Result<()> {
     let stage = truth.build_stage()?;
     let mut data = Vec::new();
     for (name, (t, u)) in [
-        ("fast.csv", protocol::fast_input(50_000.0, 0.2)),
+        (
+            "fast.csv",
+            protocol::fast_input(model_core::params::SAMPLE_RATE_HZ, 0.2),
+        ),
         ("slow.csv", protocol::slow_input(1_000.0, a.slow_seconds)),
     ] {
         let y = simulate(&stage, truth.period_s, &t, &u);

@@ -65,7 +65,7 @@ pub struct SynthArgs {
     #[arg(long, default_value_t = 2.0)]
     pub seconds: f64,
     /// Record sampling rate, Hz.
-    #[arg(long, default_value_t = 50_000.0)]
+    #[arg(long, default_value_t = model_core::params::SAMPLE_RATE_HZ)]
     pub rate: f64,
     /// Span of the input above the offset, volts (forc: use 10 for the 0..10 V table).
     #[arg(long, default_value_t = 6.0)]

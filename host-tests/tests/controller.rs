@@ -37,7 +37,7 @@ fn run(shape: Shape, freq_hz: f64, hysteresis_ff: bool) -> Run {
     let c = Controller::new(&cfg).unwrap();
     let mut st = ControllerState::new(&c);
     // Bring the stage to the start of the reference in open loop, then close the loop.
-    let u0 = 1.0 / 0.79;
+    let u0 = 1.0 / model_core::params::PLANT_GAIN as f32;
     let mut ss = stage.steady_state(u0);
     st.set_mode(Mode::OpenLoop);
     st.set_reference(u0);
@@ -47,7 +47,7 @@ fn run(shape: Shape, freq_hz: f64, hysteresis_ff: bool) -> Run {
         y = stage.step(&mut ss, s.dac.volts());
     }
     st.set_mode(Mode::ClosedLoop);
-    let period = (50_000.0 / freq_hz) as usize;
+    let period = (model_core::params::SAMPLE_RATE_HZ / freq_hz) as usize;
     let total = 40_000usize.max(6 * period);
     let measure_from = total - 2 * period;
     let (mut sum2, mut peak, mut n) = (0.0f64, 0.0f64, 0usize);

@@ -497,11 +497,11 @@ mod tests {
         };
         let c = Controller::new(&cfg).unwrap();
         let plant = LinearPlant::new(&LinearPlantConfig::default()).unwrap();
-        let mut ps = plant.steady_state(4.0 / 0.79);
+        let mut ps = plant.steady_state(4.0 / params::PLANT_GAIN as f32);
         let mut st = ControllerState::new(&c);
         // Open loop at the operating point first, then close the loop.
         st.set_mode(Mode::OpenLoop);
-        st.set_reference(4.0 / 0.79);
+        st.set_reference(4.0 / params::PLANT_GAIN as f32);
         for _ in 0..3 {
             let s = c.step(&mut st, AdcCode::from_volts(plant.output(&ps)));
             plant.step(&mut ps, s.dac.volts());

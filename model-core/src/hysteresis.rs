@@ -276,12 +276,13 @@ impl HysteresisTable {
     }
 
     fn linear_fallback() -> Self {
-        let step = 10.0 / (GRID_NODES - 1) as f32;
+        let span_v = (params::HYST_DEFAULT_INPUT_MAX_V - params::HYST_DEFAULT_INPUT_MIN_V) as f32;
+        let step = span_v / (GRID_NODES - 1) as f32;
         let mut e = [0.0f32; TABLE_LEN];
         for i in 1..GRID_NODES {
             for j in 0..i {
                 if let Some(slot) = packed_index(i, j).and_then(|k| e.get_mut(k)) {
-                    *slot = 0.79 * step * (i - j) as f32;
+                    *slot = params::HYST_DEFAULT_DC_GAIN as f32 * step * (i - j) as f32;
                 }
             }
         }

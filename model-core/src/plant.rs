@@ -200,7 +200,7 @@ mod tests {
         for _ in 0..5000 {
             y = p.step(&mut s, 1.0);
         }
-        assert!((y - 0.79).abs() < 1e-5, "{y}");
+        assert!((y - params::PLANT_GAIN as f32).abs() < 1e-5, "{y}");
     }
 
     #[test]

@@ -109,7 +109,7 @@ pub fn synth_identification(a: &crate::synth::SynthArgs) -> anyhow::Result<()> {
     let stem = a.output.with_extension("");
     let slow_s = a.seconds.max(20.0);
     for (tag, (t, u)) in [
-        ("fast", fast_input(50_000.0, 0.2)),
+        ("fast", fast_input(model_core::params::SAMPLE_RATE_HZ, 0.2)),
         ("slow", slow_input(1_000.0, slow_s)),
     ] {
         let y = crate::simulate::simulate(&stage, model.period_s, &t, &u);

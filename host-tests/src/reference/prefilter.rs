@@ -11,6 +11,7 @@
 //! total lag `K = ceil((Td + 4 tau)/T)` whole samples. The time response comes from the
 //! frequency response by an inverse FFT (impulse response), so it too is independent of any
 //! recursion.
+use model_core::params;
 use rustfft::FftPlanner;
 use rustfft::num_complex::Complex64;
 use std::f64::consts::PI;
@@ -43,16 +44,17 @@ pub struct RefPreFilter {
 impl RefPreFilter {
     /// The thesis loop (eq. 4.4, 4.5) at 50 kHz with planning time constant `tau_s`.
     pub fn thesis(tau_s: f64) -> Self {
-        let t = 20e-6;
+        // The thesis numbers from the one parameters module; the maths below is this file's own.
+        let t = 1.0 / params::SAMPLE_RATE_HZ;
         Self {
-            kc: 1e4,
-            zero_rad_s: 1.0,
-            pole_rad_s: 0.398,
-            gain: 0.79,
-            we: 2.0 * PI * 2000.0,
-            wn: 2.0 * PI * 5792.0,
-            zeta: 0.08,
-            shifted_delay_s: 85e-6,
+            kc: params::LAG_KC,
+            zero_rad_s: params::LAG_ZERO_RAD_S,
+            pole_rad_s: params::LAG_POLE_RAD_S,
+            gain: params::PLANT_GAIN,
+            we: 2.0 * PI * params::AMP_POLE_HZ,
+            wn: 2.0 * PI * params::STAGE_MODE_HZ,
+            zeta: params::STAGE_DAMPING,
+            shifted_delay_s: params::PLANT_DELAY_S,
             tau_s,
             period_s: t,
         }
