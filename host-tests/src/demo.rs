@@ -25,6 +25,11 @@ pub struct DemoArgs {
     pub seed: u64,
 }
 
+/// Weights of the demo stage's play-sum hysteresis on [`params::PLAY_RADII_V`] (our
+/// assumption: a loop of about 0.28 V, 3.5 % of the sensor span, on a full 0-10 V cycle).
+pub const DEMO_PLAY_WEIGHTS: [f64; params::PLAY_OPERATORS] =
+    [0.01, 0.01, 0.02, 0.02, 0.02, 0.02, 0.015, 0.01];
+
 /// The demo's virtual stage: `thesis-linear` plus the thesis' drift (eq. 5.1) and a play-sum
 /// hysteresis of about 15 % of the span, 1 mV noise.
 pub fn demo_truth(seed: u64) -> ModelFile {
@@ -40,7 +45,7 @@ pub fn demo_truth(seed: u64) -> ModelFile {
     });
     m.hysteresis_play = Some(PlaySection {
         radii_v: params::PLAY_RADII_V,
-        weights: [0.03, 0.04, 0.03, 0.015],
+        weights: DEMO_PLAY_WEIGHTS,
     });
     m
 }

@@ -3,7 +3,7 @@
 //! Records are synthesised from a ground truth that uses **other functional forms** than the
 //! workflow fits: drift is a logarithmic creep law `gamma ln(1 + t / tau0)` per volt of step
 //! (superposed over the input's history; the workflow fits three first-order lags), hysteresis
-//! is a Bouc-Wen model (the workflow fits four play operators). Non-linear gain, slew limit,
+//! is a Bouc-Wen model (the workflow fits eight play operators). Non-linear gain, slew limit,
 //! extra delay and a second mode use the stage's own blocks with random parameters. Every
 //! record has 1 mV of sensor noise. The truth is written to its own JSON file, apart from the
 //! CSV records the workflow reads; the workflow starts from `thesis-linear` and is told
@@ -186,6 +186,46 @@ fn run_case(kind: &[&str], seed: u64, slow_s: f64) -> Outcome {
         for (i, t) in d.tried.iter().enumerate() {
             println!("  tried at step {}: {t:?}", i + 1);
         }
+        for (r, rec) in data.iter().enumerate() {
+            let y = gap::sim(&d.model, rec).unwrap();
+            let (mut e_edge, mut n_edge, mut e_set, mut n_set) = (0.0, 0, 0.0, 0);
+            let mut since = usize::MAX;
+            let win = (3e-3 / rec.period_s()).ceil() as usize;
+            for (i, yi) in y.iter().enumerate() {
+                if i > 0 && (rec.u_v[i] - rec.u_v[i - 1]).abs() > 0.02 {
+                    since = 0;
+                } else {
+                    since = since.saturating_add(1);
+                }
+                let e = (rec.y_v[i] - yi).powi(2);
+                if since <= win {
+                    e_edge += e;
+                    n_edge += 1;
+                } else {
+                    e_set += e;
+                    n_set += 1;
+                }
+            }
+            println!(
+                "  record {r}: final RMS within 3 ms of edges {:.2} mV ({n_edge}), elsewhere {:.2} mV ({n_set})",
+                1e3 * (e_edge / n_edge.max(1) as f64).sqrt(),
+                1e3 * (e_set / n_set.max(1) as f64).sqrt()
+            );
+        }
+        for s in &d.steps {
+            println!(
+                "  {} per record (fast, slow) mV: {:.2?} -> {:.2?}",
+                s.effect,
+                s.record_rms_before_v
+                    .iter()
+                    .map(|v| v * 1e3)
+                    .collect::<Vec<_>>(),
+                s.record_rms_after_v
+                    .iter()
+                    .map(|v| v * 1e3)
+                    .collect::<Vec<_>>()
+            );
+        }
     }
     // Each correctly named effect: its step cuts the residual >= 5x, or brings it within 1.5x
     // of the noise floor, or (in a pair) removing it from the final model raises the residual
@@ -253,12 +293,17 @@ fn kinds() -> Vec<Vec<&'static str>> {
 
 #[test]
 fn hidden_effects_are_named() {
-    // Release (the README's test command): 69 cases, 3 of each of the 23 kinds (2 clean,
-    // 6 single effects, 15 pairs), 30 s slow records. Debug builds run 8 cases so the file
-    // stays quick (about 15 s); the 95 % figure is asserted on the release run.
+    // Release (the README's test command): 92 cases, 4 of each of the 23 kinds (2 clean,
+    // 6 single effects, 15 pairs; `GAP_PER_KIND` changes the 4), 30 s slow records. Debug
+    // builds run 8 cases so the file stays quick; the 95 % figure is asserted on the release
+    // run.
     let release = !cfg!(debug_assertions);
     let ks = kinds();
-    let n_cases = if release { 3 * ks.len() } else { 8 };
+    let per_kind: usize = std::env::var("GAP_PER_KIND")
+        .ok()
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(4);
+    let n_cases = if release { per_kind * ks.len() } else { 8 };
     let only: Option<u64> = std::env::var("GAP_SEED").ok().and_then(|s| s.parse().ok());
     let slow_s = 30.0;
     let cases: Vec<(Vec<&str>, u64)> = (0..n_cases)
@@ -355,9 +400,12 @@ fn hidden_effects_are_named() {
         );
     }
     // Every correctly named effect should cut the residual of the record that shows it >= 5x
-    // or bring it within 1.5x of the floor. Measured: all but one (a second mode under a
-    // Bouc-Wen hysteresis whose misfit by the play-operator form stays in the fast record: its
-    // cut is 1.9x). Asserted: at least 98 % of the correctly named effects.
+    // or bring it within 1.5x of the floor. Measured on the 92 cases: all but two, both a
+    // second mode under a Bouc-Wen hysteresis with strongly non-congruent minor loops (cuts
+    // 1.9x and 1.7x). Bouc-Wen's small reversals are not wiped out when the input moves on, so
+    // no Preisach-type form (play operators, the Everett table) fits the fast record's reversal
+    // history: 15-18 mV of hysteresis misfit stays there, and the mode, which removes all the
+    // ringing, cannot cut more. Asserted: at least 98 % of the correctly named effects.
     let correct: usize = outcomes
         .iter()
         .map(|o| o.named.iter().filter(|n| o.truth.contains(n)).count())
@@ -460,8 +508,11 @@ fn bad_models_give_clear_errors() {
     let e = ModelFile::parse(&unknown_effect).unwrap_err();
     println!("unknown table: {e:#}");
     assert!(format!("{e:#}").contains("creep"));
+    let n = params::PLAY_OPERATORS;
     let bad_hyst = format!(
-        "{good}\n[hysteresis-play]\nradii_v = [0.2, 0.6, 1.5, 3.5]\nweights = [5.0, 0.0, 0.0, 0.0]\n"
+        "{good}\n[hysteresis-play]\nradii_v = {:?}\nweights = [5.0{}]\n",
+        params::PLAY_RADII_V,
+        ", 0.0".repeat(n - 1)
     );
     let e = ModelFile::parse(&bad_hyst).unwrap_err();
     println!("bad hysteresis: {e:#}");

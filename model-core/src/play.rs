@@ -70,8 +70,12 @@ impl Play {
     /// Checks `cfg` and converts it.
     ///
     /// ```
-    /// use model_core::play::{Play, PlayConfig};
-    /// let p = Play::new(&PlayConfig { radii_v: [0.5, 1.0, 2.0, 3.0], weights: [0.1, 0.0, 0.0, 0.0] }).unwrap();
+    /// use model_core::{params::PLAY_OPERATORS, play::{Play, PlayConfig}};
+    /// let mut weights = [0.0; PLAY_OPERATORS];
+    /// weights[0] = 0.1;
+    /// let mut radii_v = [3.0; PLAY_OPERATORS];
+    /// radii_v[0] = 0.5;
+    /// let p = Play::new(&PlayConfig { radii_v, weights }).unwrap();
     /// let mut s = p.steady_state(0.0);
     /// assert!((p.step(&mut s, 5.0) + 0.05).abs() < 1e-6); // rising: -w r
     /// assert!((p.step(&mut s, 2.0) - 0.05).abs() < 1e-6); // falling: +w r
