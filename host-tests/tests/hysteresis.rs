@@ -521,6 +521,11 @@ proptest! {
             let y = t.forward(&mut shadow, u);
             prop_assert!((y - m.output_v()).abs() < 1e-6);
             prop_assert!(m.depth() == shadow.depth());
+            // The inverse builds its memory step from outputs, forward from inputs: the same
+            // turning points either way.
+            for (a, b) in m.turning_points_v().zip(shadow.turning_points_v()) {
+                prop_assert!((a - b).abs() < 1e-5, "turning point {} vs {}", a, b);
+            }
             let reachable = wanted >= y_lo as f64 && wanted <= y_hi as f64;
             if !m.flags().contains(Flags::CLAMPED) && reachable {
                 prop_assert!((y as f64 - wanted).abs() < 1e-4, "{} vs {}", y, wanted);

@@ -112,6 +112,11 @@ pub const HYST_GRID_NODES: usize = 45;
 /// Turning points the memory keeps, the bottom of the range included (our assumption: a
 /// history of 15 nested minor loops; beyond that the two innermost are merged).
 pub const HYST_MEMORY_DEPTH: usize = 32;
+/// Grid cells the exact hysteresis inverse walks from the last input before it binary-searches
+/// the rest of the segment (our assumption: at 50 kHz a 100 Hz full-range sine moves 0.06 V per
+/// sample, a tenth of a 0.23 V cell, so one cell almost always holds the answer; three cover a
+/// step of 0.7 V).
+pub const HYST_INVERSE_WALK_CELLS: usize = 3;
 /// Fixed bisection steps of the inverse: 10 V / 2^24 = 0.6 uV, below the `f32` spacing at
 /// 10 V (our assumption).
 pub const HYST_INVERSE_ITERATIONS: u32 = 24;
