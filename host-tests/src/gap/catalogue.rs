@@ -71,7 +71,8 @@ pub fn present(m: &ModelFile, effect: &str) -> bool {
 pub fn param_count(effect: &str) -> usize {
     match effect {
         "resonance" => 2,
-        "drift" => 6,
+        // Three gains, three time constants and K(u)'s k1..k3.
+        "drift" => 9,
         "hysteresis" => params::PLAY_OPERATORS,
         "nonlinear-gain" => 2,
         _ => 1,
@@ -148,6 +149,12 @@ pub fn params_of(m: &ModelFile, effect: &str) -> Vec<(String, f64)> {
             for i in 0..3 {
                 v.push((format!("gain{}", i + 1), d.gains[i]));
                 v.push((format!("tau{}_s", i + 1), d.taus_s[i]));
+            }
+            // K(u) = k0 + k1 u + k2 u^2 + k3 u^3, shown when it is not 1.
+            if d.poly != [1.0, 0.0, 0.0, 0.0] {
+                for (i, k) in d.poly.iter().enumerate() {
+                    v.push((format!("k{i}"), *k));
+                }
             }
             v
         }),
@@ -254,6 +261,8 @@ pub struct SlowParams {
     pub hysteresis: Option<[f64; params::PLAY_OPERATORS]>,
     /// K'(u) = 1 + c1 u + c2 u^2.
     pub gain: Option<(f64, f64)>,
+    /// The drift's K(u), lowest power first (`None`: K = 1).
+    pub drift_poly: Option<[f64; 4]>,
 }
 
 /// `m` (without its slow effects) with the slow effects `p`; `u_range` is the inputs' span
@@ -264,7 +273,7 @@ pub fn with_slow(m: &ModelFile, p: &SlowParams, u_range: (f64, f64)) -> Option<M
         m.drift = Some(DriftSection {
             gains,
             taus_s: taus,
-            poly: [1.0, 0.0, 0.0, 0.0],
+            poly: p.drift_poly.unwrap_or([1.0, 0.0, 0.0, 0.0]),
             poly_range_v: [u_range.0, u_range.1],
         });
     }
