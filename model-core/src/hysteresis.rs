@@ -67,9 +67,12 @@
 //! walk of at most [`INVERSE_WALK_CELLS`] grid cells from where the move starts (then a binary
 //! search over the rest of the segment) finds the cell, and the bilinear Everett function,
 //! linear along the moving coordinate inside a cell, is solved in closed form. In a closed
-//! loop the wanted output moves little per sample, so this is one look-up (333 instructions
-//! on Cortex-M4 against 1130 for a binary search from scratch). It is checked against a plain
-//! bisection of `forward` ([`HysteresisTable::inverse_by_bisection`]) in host-tests.
+//! loop the wanted output moves little per sample, so this is one look-up (330 instructions
+//! on Cortex-M4 against 1130 for a binary search from scratch). The memory step is built from
+//! the same turning-point outputs, and the recorded output is the wanted one (the cell is
+//! linear along the move; `forward` recomputes it within a few f32 ulps). It is checked
+//! against a plain bisection of `forward` ([`HysteresisTable::inverse_by_bisection`]) and
+//! against `forward`'s memory in host-tests.
 //!
 //! # Edges and a full memory (defined behaviour)
 //! * **Input outside the range**: clamped to `[u_min, u_max]`, [`Flags::CLAMPED`] set in
@@ -537,8 +540,8 @@ impl HysteresisTable {
     /// then a walk from the start of the move, cell by cell, finds the cell (a binary search
     /// over the nodes after [`INVERSE_WALK_CELLS`] cells), where the bilinear Everett function
     /// is linear in the moving coordinate and is solved directly. Bounded: at most
-    /// `MEMORY_DEPTH / 2` segment checks and `INVERSE_WALK_CELLS + log2(GRID_NODES) + 3` table
-    /// look-ups. A wanted output the history cannot reach saturates the input at the range edge
+    /// `MEMORY_DEPTH / 2` segment checks and `INVERSE_WALK_CELLS + log2(GRID_NODES) + 6` table
+    /// look-ups (one for a merge, the walk, the binary search with its two ends, the result). A wanted output the history cannot reach saturates the input at the range edge
     /// ([`Flags::CLAMPED`]); a non-finite one holds the last input ([`Flags::NONFINITE`]).
     pub fn inverse(&self, mem: &mut HysteresisMemory, wanted_output_v: f32) -> f32 {
         self.ensure_init(mem);
@@ -594,8 +597,23 @@ impl HysteresisTable {
         };
         // Where the move starts: the last input, and the output there (known: the move's
         // segment passes through the present point, or through the turning point it wipes).
+        // With a full memory the merge moves the present point onto the enclosing loop's
+        // segment (`virt`'s output); a wanted output between the present one and that is
+        // reached by no move in this direction: stay.
         let mut start = c;
-        let mut start_out = mem.output_v;
+        let mut start_out = match virt {
+            Some(p) => p.output_v,
+            None => mem.output_v,
+        };
+        if (up && w <= start_out) || (!up && w >= start_out) {
+            let stay = Step {
+                keep: pts.len(),
+                push: None,
+                merged: false,
+                output_v: mem.output_v,
+            };
+            return (c, stay);
+        }
         for _ in 0..=MEMORY_DEPTH {
             let len = real + usize::from(virt.is_some());
             let b = len - 1;
@@ -603,10 +621,11 @@ impl HysteresisTable {
                 break;
             }
             let prev = at(b - 1);
+            // `>=` as `locate`'s `u >= prev`: reaching a turning point closes its loop.
             let beyond = if up {
-                w > prev.output_v
+                w >= prev.output_v
             } else {
-                w < prev.output_v
+                w <= prev.output_v
             };
             if !beyond {
                 break;
@@ -671,36 +690,38 @@ impl HysteresisTable {
         h: impl Fn(f32) -> f32,
     ) -> (f32, f32) {
         let (mut xa, mut ya) = (start, start_out);
+        // The first grid node beyond `start` in the direction of the move; later nodes by
+        // index (a node's volts do not always map back to its own index in f32).
+        let g = clamp_f32(
+            (start - self.u_min_v) * self.inv_step_per_v,
+            0.0,
+            (GRID_NODES - 1) as f32,
+        );
+        // Non-negative: the cast truncates towards zero (floor).
+        let i = g as usize;
+        let mut next: Option<usize> = if up {
+            Some(i + 1)
+        } else if (i as f32) < g {
+            Some(i)
+        } else {
+            i.checked_sub(1)
+        };
         for _ in 0..INVERSE_WALK_CELLS {
             if (up && xa >= end) || (!up && xa <= end) {
                 return (end, ya);
             }
-            // The next grid node beyond `xa` in the direction of the move, or `end`.
-            let g = clamp_f32(
-                (xa - self.u_min_v) * self.inv_step_per_v,
-                0.0,
-                (GRID_NODES - 1) as f32,
-            );
-            // Non-negative: the cast truncates towards zero (floor).
-            let i = g as usize;
-            let xn = if up {
-                let k = i + 1;
-                if k < GRID_NODES {
-                    self.node_v(k).min(end)
-                } else {
-                    end
-                }
-            } else {
-                let k = if (i as f32) < g {
-                    Some(i)
-                } else {
-                    i.checked_sub(1)
-                };
-                match k {
-                    Some(k) => self.node_v(k).max(end),
-                    None => end,
-                }
+            let xn = match next.filter(|&k| k < GRID_NODES) {
+                Some(k) if up => self.node_v(k).min(end),
+                Some(k) => self.node_v(k).max(end),
+                None => end,
             };
+            next = next.and_then(|k| {
+                if up {
+                    k.checked_add(1)
+                } else {
+                    k.checked_sub(1)
+                }
+            });
             let yn = h(xn);
             let inside = if up { w <= yn } else { w >= yn };
             if inside {

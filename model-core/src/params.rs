@@ -113,9 +113,9 @@ pub const HYST_GRID_NODES: usize = 45;
 /// history of 15 nested minor loops; beyond that the two innermost are merged).
 pub const HYST_MEMORY_DEPTH: usize = 32;
 /// Grid cells the exact hysteresis inverse walks from the last input before it binary-searches
-/// the rest of the segment (our assumption: at 50 kHz a 100 Hz full-range sine moves 0.06 V per
-/// sample, a tenth of a 0.23 V cell, so one cell almost always holds the answer; three cover a
-/// step of 0.7 V).
+/// the rest of the segment (our assumption: at 50 kHz a 100 Hz full-range sine moves at most
+/// 0.063 V per sample, about a quarter of a 0.23 V cell, so one or two cells hold the answer;
+/// three cover any move of at least 0.45 V).
 pub const HYST_INVERSE_WALK_CELLS: usize = 3;
 /// Fixed bisection steps of the inverse: 10 V / 2^24 = 0.6 uV, below the `f32` spacing at
 /// 10 V (our assumption).

@@ -708,7 +708,7 @@ fn reverted_refit(
         .map(|d| sim(&b0, d))
         .collect::<anyhow::Result<_>>()
         .ok()?;
-    let p = fit_slow(data, &y0, slow_x, &set)?;
+    let p = fit_slow(data, &y0, slow_x, &set, u_range)?;
     catalogue::with_slow(&m, &p, u_range)
 }
 
@@ -754,7 +754,8 @@ fn candidates(
         }
     }
     let fitted: Vec<Option<ModelFile>> = par_map(&distinct, |set| {
-        fit_slow(data, &y0, slow_x, set).and_then(|p| catalogue::with_slow(model, &p, u_range))
+        fit_slow(data, &y0, slow_x, set, u_range)
+            .and_then(|p| catalogue::with_slow(model, &p, u_range))
     });
     for (effect, refit, set) in sets {
         let k = distinct.iter().position(|d| *d == set);
@@ -1071,11 +1072,15 @@ fn slow_regressors_shaped(data: &[Data], shape: &Shape) -> SlowRegressors {
 ///   the stage scales the whole fast map (`K'(u) (0.79 u + h(u))`).
 ///
 /// A refinement that fails (K(u) u not increasing, a singular solve) keeps the previous fit.
+///
+/// `u_range` is the range the model file gets for K(u) and K'(u) ([`catalogue::with_slow`]),
+/// so a K accepted here is one the stage accepts.
 fn fit_slow(
     data: &[Data],
     y0: &[Vec<f64>],
     x: &SlowRegressors,
     set: &[&str],
+    u_range: (f64, f64),
 ) -> Option<SlowParams> {
     let mut p = fit_slow_linear(data, y0, x, set, None)?;
     let couple = set.contains(&"hysteresis") && set.contains(&"nonlinear-gain");
@@ -1083,14 +1088,8 @@ fn fit_slow(
     if !couple && !has_drift {
         return Some(p);
     }
-    let range = data
-        .iter()
-        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), d| {
-            let (l, h) = min_max(&d.u_v);
-            (a.min(l), b.max(h))
-        });
     let mut shape = Shape {
-        range,
+        range: u_range,
         ..Shape::default()
     };
     for _ in 0..STRUCTURE_ROUNDS {
@@ -1459,7 +1458,9 @@ fn nnls_normal(a: &DMatrix<f64>, b: &DVector<f64>, nonneg: &[bool]) -> Option<DV
             return Some(x);
         };
         free[j] = true;
-        loop {
+        // Each pass frees no variable and binds at least one (the one that limits the step is
+        // set to 0 explicitly), so n passes always end it.
+        for _ in 0..n {
             let s = solve_on(&free)?;
             let bad: Vec<usize> = (0..n)
                 .filter(|&k| free[k] && nonneg[k] && s[k] <= 0.0)
@@ -1469,13 +1470,14 @@ fn nnls_normal(a: &DMatrix<f64>, b: &DVector<f64>, nonneg: &[bool]) -> Option<DV
                 break;
             }
             // Step from x towards s until the first constrained variable reaches 0.
-            let alpha = bad
+            let (limit, alpha) = bad
                 .iter()
-                .map(|&k| x[k] / (x[k] - s[k]).max(1e-300))
-                .fold(1.0f64, f64::min);
+                .map(|&k| (k, x[k] / (x[k] - s[k]).max(f64::MIN_POSITIVE)))
+                .fold((bad[0], 1.0f64), |a, b| if b.1 < a.1 { b } else { a });
             x = &x + (&s - &x) * alpha;
+            x[limit] = 0.0;
             for k in 0..n {
-                if free[k] && nonneg[k] && x[k] <= 1e-15 {
+                if free[k] && nonneg[k] && x[k] <= 0.0 {
                     free[k] = false;
                     x[k] = 0.0;
                 }
