@@ -50,7 +50,7 @@ pub const MIN_EXPLAINED: f64 = 0.1;
 /// `PRUNE_RATIO + PRUNE_PER_PARAM * k` for an effect of `k` parameters (our assumption,
 /// calibrated on the hidden-effect tests): the greedy forward pass may pick an effect that a
 /// later one makes redundant, or one whose flexible form only mops up the misfit of another's
-/// form (a four-weight hysteresis absorbing what three lags leave of a logarithmic creep), so
+/// form (a play-sum hysteresis absorbing what three lags leave of a logarithmic creep), so
 /// the bar rises with the effect's freedom.
 pub const PRUNE_RATIO: f64 = 1.5;
 /// See [`PRUNE_RATIO`].
