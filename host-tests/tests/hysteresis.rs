@@ -155,6 +155,19 @@ fn rate_independence_of_triangles() {
     assert!(worst < 1e-5);
 }
 
+/// Turning values of 24 nested loops around 5 V, amplitudes 4 * 0.85^k (down to 5 - a, up to
+/// 5 + 0.95 a), after a rise to 10 V: 49 turning points, more than the memory holds.
+fn nested_loop_inputs() -> Vec<f64> {
+    let mut amp = 4.0;
+    let mut inputs = vec![10.0];
+    for _ in 0..24 {
+        inputs.push(5.0 - amp);
+        inputs.push(5.0 + amp * 0.95);
+        amp *= 0.85;
+    }
+    inputs
+}
+
 /// The inverse on a full memory: every reversal merges the innermost loop, which moves the
 /// present point onto the enclosing loop's segment. The inverse must start from that moved
 /// point, so that the output it records is the one `forward` gives for its input.
@@ -163,14 +176,7 @@ fn inverse_on_a_full_memory_stays_in_step_with_forward() {
     let t = table();
     let mut m = HysteresisMemory::new();
     // Nested loops around 5 V fill the memory (as in the test below).
-    let mut amp = 4.0;
-    let mut inputs = vec![10.0];
-    for _ in 0..24 {
-        inputs.push(5.0 - amp);
-        inputs.push(5.0 + amp * 0.95);
-        amp *= 0.85;
-    }
-    for &u in &inputs {
+    for u in nested_loop_inputs() {
         t.forward(&mut m, u as f32);
     }
     assert!(m.depth() >= MEMORY_DEPTH - 2, "depth {}", m.depth());
@@ -209,19 +215,10 @@ fn memory_full_merges_innermost_loop_with_bounded_error() {
     let mut m = HysteresisMemory::new();
     let mut r = UnboundedEverett::new(&t);
     // Nested loops around 5 V, amplitudes 4 * 0.85^k: 24 loops need 49 turning points.
-    let mut amp = 4.0;
     let mut worst: f64 = 0.0;
-    let mut innermost_bound: f64 = 0.0;
-    let mut inputs = vec![10.0];
-    for k in 0..24 {
-        inputs.push(5.0 - amp);
-        inputs.push(5.0 + amp * 0.95);
-        if k == MEMORY_DEPTH / 2 - 2 {
-            innermost_bound = t.everett_v((5.0 + amp) as f32, (5.0 - amp) as f32) as f64;
-        }
-        amp *= 0.85;
-    }
-    for &u in &inputs {
+    let amp = 4.0 * 0.85f64.powi(MEMORY_DEPTH as i32 / 2 - 2);
+    let innermost_bound = t.everett_v((5.0 + amp) as f32, (5.0 - amp) as f32) as f64;
+    for u in nested_loop_inputs() {
         // Ramps between the turning values, 20 mV steps.
         let from = m.input_v() as f64;
         let steps = ((u - from).abs() / 0.02).ceil().max(1.0) as usize;

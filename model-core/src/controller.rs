@@ -263,11 +263,7 @@ impl Controller {
         st.prefilter = self.prefilter.settled_state(r);
         st.hysteresis
             .reset(&self.hysteresis, r / self.hysteresis_slope);
-        let ff = if self.hysteresis_ff {
-            self.hysteresis.inverse(&mut st.hysteresis, r) - r / self.hysteresis_slope
-        } else {
-            0.0
-        };
+        let ff = self.feedforward(st, r);
         let u = st.lag.output_v();
         st.lag.reset_with_feedforward(u, ff);
     }

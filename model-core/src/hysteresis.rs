@@ -67,7 +67,7 @@
 //! walk of at most [`INVERSE_WALK_CELLS`] grid cells from where the move starts (then a binary
 //! search over the rest of the segment) finds the cell, and the bilinear Everett function,
 //! linear along the moving coordinate inside a cell, is solved in closed form. In a closed
-//! loop the wanted output moves little per sample, so this is one look-up (330 instructions
+//! loop the wanted output moves little per sample, so this is one look-up (333 instructions
 //! on Cortex-M4 against 1130 for a binary search from scratch). The memory step is built from
 //! the same turning-point outputs, and the recorded output is the wanted one (the cell is
 //! linear along the move; `forward` recomputes it within a few f32 ulps). It is checked
@@ -395,6 +395,36 @@ impl HysteresisTable {
         }
     }
 
+    /// The stack a move up (`moving_up`) or down from the last input starts from: `real`
+    /// points of the memory, then the last input as a new turning point if the move reverses
+    /// the top segment, and whether pushing it needs a merge (memory full: the innermost loop,
+    /// levels n-2 and n-1, is dropped and the segment into the last input now starts at level
+    /// n-3, of the same direction, so the new point's output is recomputed on it). Shared by
+    /// [`Self::locate`] and the inverse ([`Self::solve`]); always inlined (as a call it cost
+    /// 30 instructions per step on Cortex-M4).
+    #[inline(always)]
+    fn open_move(
+        &self,
+        mem: &HysteresisMemory,
+        moving_up: bool,
+    ) -> (usize, Option<TurningPoint>, bool) {
+        let pts = mem.points.as_slice();
+        let n = pts.len();
+        let c = mem.input_v;
+        let top_rising = n <= 1 || (n - 1).is_multiple_of(2);
+        if moving_up == top_rising || n == 0 {
+            return (n.max(1), None, false);
+        }
+        if n >= MEMORY_DEPTH {
+            let k = n - 3;
+            let base = pts.get(k).copied().unwrap_or(self.bottom());
+            let y = self.segment(base, k.is_multiple_of(2), c);
+            (n - 2, Some(TurningPoint::new(c, y)), true)
+        } else {
+            (n, Some(TurningPoint::new(c, mem.output_v)), false)
+        }
+    }
+
     /// Where input `u` (already clamped and finite) leads from the state in `mem`, without
     /// changing it.
     fn locate(&self, mem: &HysteresisMemory, u: f32) -> Step {
@@ -402,21 +432,12 @@ impl HysteresisTable {
         let pts = mem.points.as_slice();
         let n = pts.len();
         let c = mem.input_v;
-        let top_rising = n <= 1 || (n - 1).is_multiple_of(2);
         let moving_up = u > c;
         let moved = u != c;
         let at = |k: usize| pts.get(k).copied().unwrap_or(bottom);
         // The virtual stack: `real` points of `pts`, then optionally `virt`.
-        let (mut real, mut virt, merged) = if moved && moving_up != top_rising && n >= 1 {
-            if n >= MEMORY_DEPTH {
-                // Full: drop the innermost loop (levels n-2, n-1); the segment into `c` now
-                // starts at level n-3, of the same direction.
-                let k = n - 3;
-                let y = self.segment(at(k), k.is_multiple_of(2), c);
-                (n - 2, Some(TurningPoint::new(c, y)), true)
-            } else {
-                (n, Some(TurningPoint::new(c, mem.output_v)), false)
-            }
+        let (mut real, mut virt, merged) = if moved {
+            self.open_move(mem, moving_up)
         } else {
             (n.max(1), None, false)
         };
@@ -569,32 +590,14 @@ impl HysteresisTable {
     fn solve(&self, mem: &HysteresisMemory, w: f32) -> (f32, Step) {
         let bottom = self.bottom();
         let pts = mem.points.as_slice();
-        let n = pts.len().max(1);
         let c = mem.input_v;
         if w == mem.output_v {
-            let stay = Step {
-                keep: pts.len(),
-                push: None,
-                merged: false,
-                output_v: mem.output_v,
-            };
-            return (c, stay);
+            return (c, Step::stay(mem));
         }
         let up = w > mem.output_v;
-        let top_rising = (n - 1).is_multiple_of(2);
         let at = |k: usize| pts.get(k).copied().unwrap_or(bottom);
         // The virtual stack of `locate` for a move in this direction.
-        let (mut real, mut virt, merged) = if up != top_rising {
-            if n >= MEMORY_DEPTH {
-                let k = n - 3;
-                let y = self.segment(at(k), k.is_multiple_of(2), c);
-                (n - 2, Some(TurningPoint::new(c, y)), true)
-            } else {
-                (n, Some(TurningPoint::new(c, mem.output_v)), false)
-            }
-        } else {
-            (n, None, false)
-        };
+        let (mut real, mut virt, merged) = self.open_move(mem, up);
         // Where the move starts: the last input, and the output there (known: the move's
         // segment passes through the present point, or through the turning point it wipes).
         // With a full memory the merge moves the present point onto the enclosing loop's
@@ -606,13 +609,7 @@ impl HysteresisTable {
             None => mem.output_v,
         };
         if (up && w <= start_out) || (!up && w >= start_out) {
-            let stay = Step {
-                keep: pts.len(),
-                push: None,
-                merged: false,
-                output_v: mem.output_v,
-            };
-            return (c, stay);
+            return (c, Step::stay(mem));
         }
         for _ in 0..=MEMORY_DEPTH {
             let len = real + usize::from(virt.is_some());
@@ -855,6 +852,18 @@ struct Step {
     push: Option<TurningPoint>,
     merged: bool,
     output_v: f32,
+}
+
+impl Step {
+    /// No change: the input stays where it is.
+    fn stay(mem: &HysteresisMemory) -> Self {
+        Self {
+            keep: mem.points.len(),
+            push: None,
+            merged: false,
+            output_v: mem.output_v,
+        }
+    }
 }
 
 /// The input history that matters: the turning points not yet wiped out, bottom first, plus

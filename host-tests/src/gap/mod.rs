@@ -516,14 +516,7 @@ pub fn diagnose(base: &ModelFile, data: &[Data], opts: &Options) -> anyhow::Resu
                 let after = (c.mse[i] - var[i]).max(0.0);
                 after <= 3.0 * before + var[i]
             });
-            let mut sig_ok = sigs.supports(&c.effect);
-            if c.effect == "resonance" {
-                // A resonance is a line: the fitted mode must be lightly damped and sit on a
-                // line of the residual spectrum (within 15 %, LINE_RATIO_MIN x the median).
-                sig_ok &= catalogue::fast_value(&c.model, "resonance").is_some_and(|(f, z)| {
-                    z <= MAX_MODE_DAMPING && sigs.line_ratio_near(f) >= LINE_RATIO_MIN
-                });
-            }
+            let sig_ok = sigs.supports(&c.effect, &c.model);
             let ok = score < 0.0 && explained >= MIN_EXPLAINED && sig_ok && harmless;
             scored.push((c, score, explained, ok));
         }
@@ -547,14 +540,7 @@ pub fn diagnose(base: &ModelFile, data: &[Data], opts: &Options) -> anyhow::Resu
         for (k, v) in &p {
             params.insert(k.clone(), serde_json::json!(v));
         }
-        let words = match catalogue::fast_value(&best.model, "resonance") {
-            Some((f, _)) if best.effect == "resonance" => format!(
-                "residual line at {:.0} Hz, {:.1}x the median spectral level",
-                f,
-                sigs.line_ratio_near(f)
-            ),
-            _ => sigs.describe(&best.effect),
-        };
+        let words = sigs.describe(&best.effect, &best.model);
         let evidence = format!(
             "{}; explains {:.0} % of the residual power above the noise floor; score {:.0} (BIC, {} parameter{})",
             words,
@@ -610,15 +596,12 @@ pub fn diagnose(base: &ModelFile, data: &[Data], opts: &Options) -> anyhow::Resu
         // A second mode whose removal brings its own line back into the residual spectrum
         // stays, whatever the growth: a misfit of another effect's form (Bouc-Wen hysteresis
         // under play operators) can dominate the fast record and hide the growth.
-        let mode_hz = catalogue::fast_value(&model, "resonance").map(|(f, _)| f);
         let weakest = trials
             .into_iter()
             .flatten()
             .map(|(e, m, s, ms)| {
-                let line_back = e == "resonance"
-                    && mode_hz.is_some_and(|f| {
-                        signatures::compute(data, &s, &noise).line_ratio_near(f) >= LINE_RATIO_MIN
-                    });
+                let line_back =
+                    e == "resonance" && signatures::compute(data, &s, &noise).supports(&e, &model);
                 // An effect whose removal adds more than PRUNE_KEEP_EXCESS_VAR noise variances
                 // to some record's residual power explains a component no noise makes: it stays
                 // whatever the ratio (far from the floor, ratios are compressed).
@@ -1185,10 +1168,7 @@ fn fit_drift_poly(
             g[(l, k)] = g[(k, l)];
         }
     }
-    let tr = (0..np).map(|i| g[(i, i)]).sum::<f64>() / np as f64;
-    for i in 0..np {
-        g[(i, i)] += 1e-10 * tr + 1e-15;
-    }
+    ridge(&mut g);
     let nonneg: Vec<bool> = (0..np)
         .map(|k| k < 3 || (k >= 6 && is_nonneg_col(fixed[k - 6])))
         .collect();
@@ -1259,10 +1239,7 @@ fn fit_slow_linear(
                 a[(i, j)] = g[(ki, kj)];
             }
         }
-        let tr = (0..p).map(|i| a[(i, i)]).sum::<f64>() / p.max(1) as f64;
-        for i in 0..p {
-            a[(i, i)] += 1e-10 * tr + 1e-15;
-        }
+        ridge(&mut a);
         let nonneg: Vec<bool> = idx.iter().map(|&k| is_nonneg_col(k)).collect();
         let beta = nnls_normal(&a, &v, &nonneg)?;
         // Reduction of the weighted SSR (at the constrained optimum too: x' A x = x' b there).
@@ -1409,6 +1386,17 @@ fn fit_slow_linear(
         }
         let (beta, _) = solve(&fixed)?;
         Some(unpack(&fixed, &beta, None))
+    }
+}
+
+/// A tiny ridge on the normal equations' diagonal (1e-10 of its mean, plus 1e-15): keeps the
+/// Cholesky factorisation defined when two regressors coincide (grid time constants, an input
+/// that never visits a play operator's range) without moving a well-posed solution.
+fn ridge(g: &mut DMatrix<f64>) {
+    let n = g.nrows();
+    let tr = (0..n).map(|i| g[(i, i)]).sum::<f64>() / n.max(1) as f64;
+    for i in 0..n {
+        g[(i, i)] += 1e-10 * tr + 1e-15;
     }
 }
 
@@ -1596,10 +1584,7 @@ impl<'a> DriftProblem<'a> {
                 }
             }
         }
-        let tr = (0..p).map(|i| g[(i, i)]).sum::<f64>() / p as f64;
-        for i in 0..p {
-            g[(i, i)] += 1e-10 * tr + 1e-15;
-        }
+        ridge(&mut g);
         let nonneg: Vec<bool> = (0..p)
             .map(|k| k < 3 || is_nonneg_col(self.fixed[k - 3]))
             .collect();

@@ -21,7 +21,8 @@
 //! Each is a number with a unit; [`Signatures::supports`] turns them into the gate the
 //! selection uses, [`Signatures::describe`] into words for the table.
 
-use super::Data;
+use super::{Data, LINE_RATIO_MIN, MAX_MODE_DAMPING, catalogue};
+use crate::model_file::ModelFile;
 use model_core::params;
 use rustfft::{FftPlanner, num_complex::Complex};
 
@@ -33,8 +34,6 @@ pub struct Signatures {
     /// Strongest line of the first fast record's Welch-averaged residual spectrum above
     /// 500 Hz, Hz.
     pub peak_hz: f64,
-    /// Its height over the median spectral level.
-    pub peak_ratio: f64,
     /// Largest tail after a step during a hold, volts.
     pub tail_v: f64,
     /// Largest rising/falling gap of the residual at equal input, volts.
@@ -90,7 +89,7 @@ pub fn compute(data: &[Data], sims: &[Vec<f64>], noise: &[f64]) -> Signatures {
             if s.spectrum.is_empty() {
                 s.spectrum = spectrum(&r, t);
                 s.welch = welch(&r, t);
-                (s.peak_hz, s.peak_ratio) = strongest_line(&s.welch);
+                s.peak_hz = strongest_line_hz(&s.welch);
             }
         }
         // Holds: runs of constant input of at least 0.2 s.
@@ -171,33 +170,23 @@ fn curvature(xs: &[(f64, f64)], lo: f64, hi: f64) -> f64 {
     }
 }
 
-/// One Hann-windowed amplitude spectrum of `r` (up to 2^16 samples), for plots.
+/// One Hann-windowed amplitude spectrum of `r` (up to 2^16 samples), for plots: the Welch
+/// routine with a single segment.
 fn spectrum(r: &[f64], t: f64) -> Vec<(f64, f64)> {
-    let n = r.len().min(1 << 16);
-    if n < 64 {
-        return vec![];
-    }
-    let m = mean(&r[..n]);
-    let mut buf: Vec<Complex<f64>> = r[..n]
-        .iter()
-        .enumerate()
-        .map(|(i, x)| {
-            let w = 0.5 - 0.5 * (2.0 * std::f64::consts::PI * i as f64 / n as f64).cos();
-            Complex::new((x - m) * w, 0.0)
-        })
-        .collect();
-    FftPlanner::new().plan_fft_forward(n).process(&mut buf);
-    let df = 1.0 / (n as f64 * t);
-    (1..n / 2)
-        .map(|k| (k as f64 * df, 4.0 * buf[k].norm() / n as f64))
-        .collect()
+    averaged_spectrum(&r[..r.len().min(1 << 16)], t, usize::MAX)
 }
 
-/// Welch-averaged amplitude spectrum of `r` (sampling period `t` s): Hann segments of
-/// [`WELCH_SEGMENT`] samples (or the whole record if shorter), half overlap, mean removed per
-/// segment, power averaged, square root taken.
+/// Welch-averaged amplitude spectrum of `r` for the line test: [`WELCH_SEGMENT`] samples per
+/// segment.
 fn welch(r: &[f64], t: f64) -> Vec<(f64, f64)> {
-    let seg = WELCH_SEGMENT.min(r.len());
+    averaged_spectrum(r, t, WELCH_SEGMENT)
+}
+
+/// Amplitude spectrum of `r` (sampling period `t` s) averaged over Hann segments of `seg`
+/// samples (or the whole record if shorter), half overlap, mean removed per segment, power
+/// averaged, square root taken: `4 |X| / n` per bin for one segment.
+fn averaged_spectrum(r: &[f64], t: f64, seg: usize) -> Vec<(f64, f64)> {
+    let seg = seg.min(r.len());
     if seg < 64 {
         return vec![];
     }
@@ -232,63 +221,72 @@ fn welch(r: &[f64], t: f64) -> Vec<(f64, f64)> {
         .collect()
 }
 
-/// The strongest line of `spec` above 500 Hz: (frequency, height over the median above
-/// 500 Hz).
-fn strongest_line(spec: &[(f64, f64)]) -> (f64, f64) {
-    let hi: Vec<(f64, f64)> = spec.iter().copied().filter(|(f, _)| *f >= 500.0).collect();
-    if hi.is_empty() {
-        return (0.0, 0.0);
-    }
-    let mut mags: Vec<f64> = hi.iter().map(|x| x.1).collect();
-    let med = super::median_pub(&mut mags).max(1e-15);
-    let (f, a) = hi
+/// Median level of `spec` above 500 Hz (the reference of the line test).
+fn median_above_500(spec: &[(f64, f64)]) -> f64 {
+    let mut mags: Vec<f64> = spec
         .iter()
-        .fold((0.0, 0.0), |acc, x| if x.1 > acc.1 { *x } else { acc });
-    (f, a / med)
+        .filter(|(f, _)| *f >= 500.0)
+        .map(|x| x.1)
+        .collect();
+    super::median_pub(&mut mags).max(1e-15)
+}
+
+/// The frequency of the strongest line of `spec` above 500 Hz (0 if none); its height is
+/// [`Signatures::line_ratio_near`].
+fn strongest_line_hz(spec: &[(f64, f64)]) -> f64 {
+    spec.iter()
+        .filter(|(f, _)| *f >= 500.0)
+        .fold((0.0, 0.0), |acc, x| if x.1 > acc.1 { *x } else { acc })
+        .0
 }
 
 impl Signatures {
     /// Height of the Welch-averaged residual spectrum near `f_hz` (within 15 %) over its
     /// median level above 500 Hz: is there a line where a fitted mode sits?
     pub fn line_ratio_near(&self, f_hz: f64) -> f64 {
-        let mut mags: Vec<f64> = self
-            .welch
-            .iter()
-            .filter(|(f, _)| *f >= 500.0)
-            .map(|x| x.1)
-            .collect();
-        let med = super::median_pub(&mut mags).max(1e-15);
         let near = self
             .welch
             .iter()
             .filter(|(f, _)| (f / f_hz - 1.0).abs() <= 0.15)
             .map(|x| x.1)
             .fold(0.0f64, f64::max);
-        near / med
+        near / median_above_500(&self.welch)
     }
 
-    /// Does the residual show the signature of `effect`? (The gate of the selection.)
-    pub fn supports(&self, effect: &str) -> bool {
+    /// Does the residual show the signature of `effect` as `model` has it? (The gate of the
+    /// selection; the final check asks it of the residual without the effect.) A second mode
+    /// must be lightly damped and sit on a line of the residual spectrum (within 15 %,
+    /// [`LINE_RATIO_MIN`] x the median); saturation needs an input near the amplifier's
+    /// limits.
+    pub fn supports(&self, effect: &str, model: &ModelFile) -> bool {
         let lim_lo = params::AMP_INPUT_MIN_V + 0.5;
         let lim_hi = params::AMP_INPUT_MAX_V - 0.5;
         match effect {
             "saturation" => self.u_span_v.0 <= lim_lo || self.u_span_v.1 >= lim_hi,
+            "resonance" => catalogue::fast_value(model, "resonance").is_some_and(|(f, z)| {
+                z <= MAX_MODE_DAMPING && self.line_ratio_near(f) >= LINE_RATIO_MIN
+            }),
             _ => true,
         }
     }
 
-    /// The evidence for `effect` in words.
-    pub fn describe(&self, effect: &str) -> String {
+    /// The evidence for `effect` (as `model` has it) in words.
+    pub fn describe(&self, effect: &str, model: &ModelFile) -> String {
         let mv = |v: f64| format!("{:.1} mV", 1e3 * v);
         match effect {
             "time-delay" | "amplifier-pole" | "slew-rate-limit" => format!(
                 "{:.0} % of the fast residual power within 3 ms after edges",
                 100.0 * self.edge_share
             ),
-            "resonance" => format!(
-                "residual line at {:.0} Hz, {:.0}x the median spectral level",
-                self.peak_hz, self.peak_ratio
-            ),
+            "resonance" => {
+                // The line at the fitted mode, else the strongest one.
+                let f = catalogue::fast_value(model, "resonance").map_or(self.peak_hz, |m| m.0);
+                format!(
+                    "residual line at {:.0} Hz, {:.1}x the median spectral level",
+                    f,
+                    self.line_ratio_near(f)
+                )
+            }
             "drift" => format!("tails after steps up to {} during holds", mv(self.tail_v)),
             "hysteresis" => format!(
                 "residual differs by up to {} between rising and falling input",
