@@ -28,6 +28,9 @@
 //! * [`drift`], [`gain`], [`amplifier`], [`sensor`]: the non-linear blocks of ch. 5.
 //! * [`stage`]: the ch. 6 overall model composed of all blocks (the wiring is stated there).
 //! * [`frame`]: the capture wire format (firmware encoder, host decoder).
+//! * [`closed_loop`]: the one closed-loop harness ([`controller::Controller::step`] around a
+//!   stage through the converters) that the QEMU [`scenarios`] and the host's loop and tracking
+//!   figures all run.
 //!
 //! Each block keeps its configuration (coefficients, `Copy`) apart from its state, so a new
 //! configuration can be computed outside the interrupt and swapped in whole.
@@ -36,6 +39,7 @@
 #![warn(missing_docs)]
 
 pub mod amplifier;
+pub mod closed_loop;
 pub mod codes;
 pub mod controller;
 pub mod discretize;

@@ -19,10 +19,11 @@
 //! the controller steps on that code and the scenario's reference, the DAC code's volts drive
 //! the stage for one period.
 //!
-//! # The stage
-//! [`StageModel`] is what the loop drives: the linear plant of eq. 4.4 ([`LinearStage`]), or
-//! the ch. 6 overall model ([`FullStage`]: hysteresis, drift, K'(u), amplifier, converters and
-//! its own seeded Gaussian sensor noise) for the hysteresis scenarios.
+//! # The loop
+//! [`run_with`] drives the one closed-loop harness ([`crate::closed_loop::ClosedLoop`]) that
+//! `piezo loop` and `piezo track` run too: the linear plant of eq. 4.4 behind the converters
+//! with the scenarios' uniform noise ([`linear_plant`]), or the ch. 6 overall model with its own
+//! sensor ([`full_plant`]) for the hysteresis scenarios.
 //!
 //! # Scenarios ([`Scenario`])
 //! 0.5 s each at 50 kHz ([`SAMPLES`]): a 0 -> 5 V step, a 100 Hz triangle from the on-board
@@ -35,18 +36,18 @@
 //!
 //! Bounded: one loop of [`SAMPLES`] iterations, no allocation, no indexing, no panics.
 
-use crate::codes::AdcCode;
-use crate::controller::{
-    Controller, ControllerConfig, ControllerState, Faults, Mode, ReferenceSource,
+use crate::closed_loop::{
+    ClosedLoop, Converted, FullStage, LinearStage, LoopPlant, LoopSample, NoNoise, UniformNoise,
+    scenario_noise,
 };
+use crate::codes::AdcCode;
+use crate::controller::{Controller, ControllerConfig, Faults, ReferenceSource};
 use crate::lag::LagConfig;
 use crate::limits::ConfigError;
 use crate::params;
-use crate::plant::{LinearPlant, LinearPlantConfig, PlantState};
 use crate::prefilter::{PreFilterConfig, PreFilterMode};
 use crate::reference::{ReferenceConfig, Shape};
 use crate::sections::Accumulator;
-use crate::stage::{Stage, StageConfig, StageState};
 
 /// Samples per scenario: [`params::SCENARIO_DURATION_S`] at [`params::SAMPLE_RATE_HZ`].
 pub const SAMPLES: u32 = (params::SCENARIO_DURATION_S * params::SAMPLE_RATE_HZ) as u32;
@@ -210,107 +211,6 @@ fn step_reference(n: u32) -> f32 {
         params::SCENARIO_STEP_V as f32
     } else {
         0.0
-    }
-}
-
-/// What the loop drives: input volts at the amplifier's control input, output sensor monitor
-/// volts.
-pub trait StageModel {
-    /// The true output at the present sample, sensor volts without noise: what the error
-    /// figures are measured on.
-    fn output_v(&self) -> f32;
-    /// What the sensor reads at the present sample, volts, before the ADC. `noise` is a
-    /// uniform sample in `[-1, 1)` from the scenario's seeded generator, for models without a
-    /// sensor of their own.
-    fn measured_v(&self, noise: f32) -> f32;
-    /// Hold `u_v` for one period and advance.
-    fn step(&mut self, u_v: f32);
-}
-
-/// The linear plant of eq. 4.4 with its state.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct LinearStage {
-    /// Configuration.
-    pub plant: LinearPlant,
-    /// State.
-    pub state: PlantState,
-}
-
-impl LinearStage {
-    /// The thesis plant at rest at 0 V.
-    pub fn thesis() -> Result<Self, ConfigError> {
-        Ok(Self {
-            plant: LinearPlant::new(&LinearPlantConfig::default())?,
-            state: PlantState::default(),
-        })
-    }
-}
-
-impl StageModel for LinearStage {
-    #[inline]
-    fn output_v(&self) -> f32 {
-        self.plant.output(&self.state)
-    }
-    /// The output plus uniform noise of +-[`params::SENSOR_NOISE_V`].
-    #[inline]
-    fn measured_v(&self, noise: f32) -> f32 {
-        self.output_v() + params::SENSOR_NOISE_V as f32 * noise
-    }
-    #[inline]
-    fn step(&mut self, u_v: f32) {
-        self.plant.step(&mut self.state, u_v);
-    }
-}
-
-/// The ch. 6 stage with its state: the sensor (noise, ADC) is the stage's own.
-#[derive(Clone, Debug)]
-pub struct FullStage {
-    /// Configuration.
-    pub stage: Stage,
-    /// State.
-    pub state: StageState,
-}
-
-impl FullStage {
-    /// The thesis' overall model (`StageConfig::thesis_full`) at rest at 0 V.
-    pub fn thesis() -> Result<Self, ConfigError> {
-        let stage = Stage::new(&StageConfig::thesis_full())?;
-        Ok(Self {
-            state: stage.steady_state(0.0),
-            stage,
-        })
-    }
-}
-
-impl StageModel for FullStage {
-    #[inline]
-    fn output_v(&self) -> f32 {
-        self.state.signals().position_v
-    }
-    /// The stage's own sensor reading (the scenario's noise is not used).
-    #[inline]
-    fn measured_v(&self, _noise: f32) -> f32 {
-        self.state.signals().measured_v
-    }
-    #[inline]
-    fn step(&mut self, u_v: f32) {
-        self.stage.step(&mut self.state, u_v);
-    }
-}
-
-/// Seeded xorshift32: uniform noise, the same sequence everywhere.
-#[derive(Clone, Copy, Debug)]
-struct Noise(u32);
-
-impl Noise {
-    /// The next value in `[-1, 1)`.
-    fn next(&mut self) -> f32 {
-        let mut x = self.0;
-        x ^= x << 13;
-        x ^= x >> 17;
-        x ^= x << 5;
-        self.0 = x;
-        (x >> 8) as f32 * (2.0 / 16_777_216.0) - 1.0
     }
 }
 
@@ -497,31 +397,45 @@ pub fn scenario_controller(scenario: Scenario) -> Result<Controller, ConfigError
     Controller::new(&scenario.config())
 }
 
+/// The scenario's plant: `stage` behind the converters, with the scenarios' uniform sensor
+/// noise ([`scenario_noise`]) for the linear stage; the ch. 6 stage has its own sensor.
+pub fn linear_plant() -> Result<Converted<LinearStage, UniformNoise>, ConfigError> {
+    Ok(Converted::new(LinearStage::thesis()?, scenario_noise()))
+}
+
+/// The ch. 6 stage ([`FullStage::thesis`]) behind the converters; its sensor is its own.
+pub fn full_plant() -> Result<Converted<FullStage, NoNoise>, ConfigError> {
+    Ok(Converted::new(FullStage::thesis()?, NoNoise))
+}
+
 /// Run `scenario` with its controller ([`Scenario::config`]) on the linear plant of eq. 4.4,
 /// or on the ch. 6 stage ([`Scenario::on_full_stage`]).
 pub fn run(scenario: Scenario) -> Result<(Controller, Figures), ConfigError> {
     let controller = scenario_controller(scenario)?;
     let figures = if scenario.on_full_stage() {
-        run_with(scenario, &controller, &mut FullStage::thesis()?)
+        run_with(scenario, ClosedLoop::new(controller, full_plant()?), |_| {}).0
     } else {
-        run_with(scenario, &controller, &mut LinearStage::thesis()?)
+        run_with(
+            scenario,
+            ClosedLoop::new(controller, linear_plant()?),
+            |_| {},
+        )
+        .0
     };
     Ok((controller, figures))
 }
 
-/// Run `scenario`: the stage starts wherever `stage` is, the controller from boot (safe mode,
-/// then closed loop).
-pub fn run_with<S: StageModel>(
+/// Run `scenario` on `lp` (the controller from boot, the plant wherever it is): the loop
+/// closes at the first sample, the faults are injected as the scenario says, and `each` sees
+/// every sample. Returns the figures and the loop as it ended.
+pub fn run_with<P: LoopPlant>(
     scenario: Scenario,
-    controller: &Controller,
-    stage: &mut S,
-) -> Figures {
-    let mut ctrl = *controller;
-    let mut st = ControllerState::new(&ctrl);
-    st.set_mode(Mode::ClosedLoop);
-    let limits = ctrl.lag.limits;
+    mut lp: ClosedLoop<P>,
+    mut each: impl FnMut(&LoopSample),
+) -> (Figures, ClosedLoop<P>) {
+    lp.close(scenario.reference_v(0));
+    let limits = lp.controller.lag.limits;
     let slew_tol = limits.slew_v_per_step * (1.0 + 1e-5) + 1e-6;
-    let mut noise = Noise(params::SCENARIO_NOISE_SEED);
     let mut f = Figures {
         fault_latched_at: NEVER,
         safe_reached_at: NEVER,
@@ -531,39 +445,38 @@ pub fn run_with<S: StageModel>(
     let mut sum_sq = Accumulator::default();
     let mut counted = 0u32;
     let mut stuck_code = AdcCode(0);
-    let mut last_command = st.command_v();
+    let mut last_command = lp.state.command_v();
     for n in 0..SAMPLES {
-        let y = stage.output_v();
-        let mut adc = AdcCode::from_volts(stage.measured_v(noise.next()));
-        match scenario {
-            Scenario::SensorSaturates if n >= FAULT_AT => adc = AdcCode::MAX,
-            Scenario::SensorSticks if n == FAULT_AT => stuck_code = adc,
-            Scenario::SensorSticks if n > FAULT_AT => adc = stuck_code,
-            Scenario::AbsurdGain if n == FAULT_AT => {
-                let ok = scenario.config();
-                for kc in [params::SCENARIO_ABSURD_KC, f64::NAN, -params::LAG_KC] {
-                    let offered = ControllerConfig {
-                        lag: LagConfig { kc, ..ok.lag },
-                        ..ok
-                    };
-                    match Controller::new(&offered) {
-                        Ok(c) => ctrl = c,
-                        Err(_) => f.refused += 1,
-                    }
+        if scenario == Scenario::AbsurdGain && n == FAULT_AT {
+            let ok = scenario.config();
+            for kc in [params::SCENARIO_ABSURD_KC, f64::NAN, -params::LAG_KC] {
+                let offered = ControllerConfig {
+                    lag: LagConfig { kc, ..ok.lag },
+                    ..ok
+                };
+                match Controller::new(&offered) {
+                    Ok(c) => lp.controller = c,
+                    Err(_) => f.refused += 1,
                 }
             }
-            _ => {}
         }
-        st.set_reference(scenario.reference_v(n));
-        let s = ctrl.step(&mut st, adc);
+        lp.state.set_reference(scenario.reference_v(n));
+        let s = lp.step_reading(|adc| match scenario {
+            Scenario::SensorSaturates if n >= FAULT_AT => AdcCode::MAX,
+            Scenario::SensorSticks if n == FAULT_AT => {
+                stuck_code = adc;
+                adc
+            }
+            Scenario::SensorSticks if n > FAULT_AT => stuck_code,
+            _ => adc,
+        });
+        each(&s);
         // The reference in force (the generator's present value, or the external one).
-        let r = s.reference_v;
-        let u = s.command_v;
-        stage.step(s.dac.volts());
-
-        f.dac_checksum = fnv1a(f.dac_checksum, s.dac.offset_binary());
+        let r = s.sample.reference_v;
+        let u = s.sample.command_v;
+        f.dac_checksum = fnv1a(f.dac_checksum, s.sample.dac.offset_binary());
         if r.is_finite() && n >= SETTLED_AT {
-            let e = r - y;
+            let e = s.error_v();
             sum_sq.add(e * e);
             counted += 1;
             if e.abs() > f.peak_err_v {
@@ -581,10 +494,11 @@ pub fn run_with<S: StageModel>(
             f.window_violations += 1;
         }
         last_command = u;
-        if !s.faults.is_empty() && f.fault_latched_at == NEVER {
+        if !s.sample.faults.is_empty() && f.fault_latched_at == NEVER {
             f.fault_latched_at = n;
         }
-        if f.fault_latched_at != NEVER && f.safe_reached_at == NEVER && u == ctrl.safe_v() {
+        if f.fault_latched_at != NEVER && f.safe_reached_at == NEVER && u == lp.controller.safe_v()
+        {
             f.safe_reached_at = n;
         }
         f.samples = n + 1;
@@ -594,10 +508,10 @@ pub fn run_with<S: StageModel>(
     } else {
         0.0
     };
-    f.final_output_v = stage.output_v();
+    f.final_output_v = lp.plant.output_v();
     f.final_command_v = last_command;
-    f.faults = st.faults().0;
-    f
+    f.faults = lp.state.faults().0;
+    (f, lp)
 }
 
 #[cfg(test)]

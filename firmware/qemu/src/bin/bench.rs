@@ -34,7 +34,8 @@ mod image {
     use model_core::prefilter::PreFilterMode;
     use model_core::prefilter::{PreFilter, PreFilterConfig, PreFilterState};
     use model_core::reference::{ReferenceConfig, ReferenceGenerator, ReferenceState, Shape};
-    use model_core::scenarios::{LinearStage, Scenario, StageModel, scenario_controller};
+    use model_core::closed_loop::{LinearStage, StageModel};
+    use model_core::scenarios::{Scenario, scenario_controller};
     use model_core::stage::{Stage, StageConfig, StageState};
     use piezo_qemu::{EXIT_FAIL, EXIT_PASS, InstructionCounter, StackProbe, cpu_part, exit};
 
