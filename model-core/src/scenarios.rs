@@ -1,6 +1,7 @@
 //! Closed-loop scenarios that run *identically* on the host and on a Cortex-M (QEMU): the
-//! scenario list, the loop of [`Controller::step`] and a stage model for a fixed number of
-//! samples, and the figures computed from it (issue #6).
+//! scenario list, a fixed number of samples of the closed-loop harness
+//! ([`crate::closed_loop`]) with the scenario's faults injected, and the figures computed from
+//! it (issue #6).
 //!
 //! # Why here
 //! The QEMU smoke runs must prove that the control code behaves on `thumbv7em` as it does in
@@ -13,11 +14,12 @@
 //! that, including an FNV-1a checksum of every DAC code sent ([`Figures::dac_checksum`]).
 //!
 //! # One sample, as on the board
-//! The ADC reads the stage output plus sensor noise (uniform, +-[`params::SENSOR_NOISE_V`],
-//! from a seeded xorshift generator, so runs repeat), a fault may replace the code (sensor
-//! saturated: the ADC's top code; sensor stuck: the code of the sample the fault starts),
-//! the controller steps on that code and the scenario's reference, the DAC code's volts drive
-//! the stage for one period.
+//! The harness's sample ([`crate::closed_loop::ClosedLoop::step_reading`]): the ADC reads the
+//! stage output plus sensor noise (uniform, +-[`params::SENSOR_NOISE_V`], from a seeded
+//! xorshift generator, so runs repeat), a fault may replace the code (sensor saturated: the
+//! ADC's top code; sensor stuck: the code of the sample the fault starts), the controller
+//! steps on that code and the scenario's reference, the DAC code's volts drive the stage for
+//! one period.
 //!
 //! # The loop
 //! [`run_with`] drives the one closed-loop harness ([`crate::closed_loop::ClosedLoop`]) that
