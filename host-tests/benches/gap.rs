@@ -3,11 +3,11 @@
 //! project's 2-core machine. A timed run (three repetitions, the figure printed), not
 //! criterion's statistics: one run takes seconds.
 
-use host_tests::demo::demo_truth;
+use host_tests::gap::demo::demo_truth;
 use host_tests::gap::{Data, Options, diagnose, protocol};
-use host_tests::model_file::ModelFile;
-use host_tests::record::Record;
-use host_tests::simulate::simulate;
+use host_tests::io::csv::Record;
+use host_tests::io::model_file::ModelFile;
+use host_tests::sim::open_loop::simulate;
 use std::time::Instant;
 
 fn main() {

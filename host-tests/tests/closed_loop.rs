@@ -3,7 +3,7 @@
 //! delay (model card, sec. 4.1.2): GM 11.5 dB, PM 60.5 deg, crossover 3076 rad/s, -3 dB
 //! 1001 Hz. Tolerances from issue #2: 1.5 dB, 4 deg, 10 %, 10 %.
 
-use host_tests::analysis::{LoopSetup, loop_figures, open_loop_response};
+use host_tests::sim::analysis::{LoopSetup, loop_figures, open_loop_response};
 use model_core::params;
 
 fn report(name: &str, measured: f64, reference: f64, unit: &str) {
@@ -78,7 +78,8 @@ fn measured_response_matches_the_continuous_loop_with_the_sampling_delay() {
 #[test]
 fn step_response_has_zero_static_error() {
     let setup = LoopSetup::thesis(params::SAMPLE_RATE_HZ, params::LAG_KC);
-    let (overshoot, settle_ms, trace) = host_tests::analysis::step_figures(&setup, 2.0, 1.0, 0.3);
+    let (overshoot, settle_ms, trace) =
+        host_tests::sim::analysis::step_figures(&setup, 2.0, 1.0, 0.3);
     let final_v = trace.last().unwrap().1;
     println!(
         "overshoot {overshoot:.2} %, settling {settle_ms:.2} ms, output after 0.3 s {final_v:.5} V"

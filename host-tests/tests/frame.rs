@@ -6,7 +6,7 @@
 use std::collections::VecDeque;
 use std::time::Duration;
 
-use host_tests::record_cmd::{Assembler, Link, Options, Recording, record, write_csv};
+use host_tests::board::{Assembler, Link, Options, Recording, record, write_csv};
 use model_core::frame::{self, Decoded, FrameRef, MAX_FRAME, MAX_RECORDS, Record};
 use proptest::prelude::*;
 

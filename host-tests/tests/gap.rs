@@ -10,9 +10,9 @@
 //! nothing else.
 
 use host_tests::gap::{self, Data, Options, diagnose, protocol};
-use host_tests::model_file::{GainSection, ModelFile, ResonanceSection, SlewSection};
-use host_tests::record::Record;
-use host_tests::simulate::simulate;
+use host_tests::io::csv::Record;
+use host_tests::io::model_file::{GainSection, ModelFile, ResonanceSection, SlewSection};
+use host_tests::sim::open_loop::simulate;
 use model_core::params;
 use rand::{Rng, SeedableRng};
 use std::collections::BTreeMap;
@@ -125,7 +125,7 @@ fn truth_model(tr: &Truth) -> ModelFile {
         m.slew_rate_limit = Some(SlewSection { output_v_per_s: s });
     }
     if let Some(d) = tr.delay_s {
-        m.time_delay = Some(host_tests::model_file::DelaySection { delay_s: d });
+        m.time_delay = Some(host_tests::io::model_file::DelaySection { delay_s: d });
     }
     if let Some((f, z)) = tr.mode {
         m.resonance = Some(ResonanceSection {
@@ -310,7 +310,7 @@ fn hidden_effects_are_named() {
         .map(|i| (ks[(i * 7) % ks.len()].clone(), 1000 + i as u64))
         .filter(|c| only.is_none_or(|s| s == c.1))
         .collect();
-    let outcomes = gap::par_map(&cases, |(k, seed)| run_case(k, *seed, slow_s));
+    let outcomes = host_tests::util::par_map(&cases, |(k, seed)| run_case(k, *seed, slow_s));
     // Confusion table: rows are the hidden effects (and "clean"), columns the names given.
     let mut names: Vec<&str> = gap::catalogue::EFFECTS.to_vec();
     names.push("(none)");
@@ -525,25 +525,26 @@ fn bad_models_give_clear_errors() {
 fn mat_records_read_and_refuse_garbage() {
     let rec = good_record();
     let y = rec.y_v.clone().unwrap();
-    let bytes = host_tests::mat::write_v5(&[("time", &rec.t_s), ("uin", &rec.u_v), ("ymeas", &y)]);
-    let r = host_tests::mat::parse_record(&bytes, "t=time,u=uin,y=ymeas").expect("mat parses");
+    let bytes =
+        host_tests::io::mat::write_v5(&[("time", &rec.t_s), ("uin", &rec.u_v), ("ymeas", &y)]);
+    let r = host_tests::io::mat::parse_record(&bytes, "t=time,u=uin,y=ymeas").expect("mat parses");
     assert_eq!(r.t_s, rec.t_s);
     assert_eq!(r.u_v, rec.u_v);
     assert_eq!(r.y_v.as_deref(), Some(&y[..]));
-    let e = host_tests::mat::parse_record(&bytes, "t=time,u=uin,y=nothere").unwrap_err();
+    let e = host_tests::io::mat::parse_record(&bytes, "t=time,u=uin,y=nothere").unwrap_err();
     println!("missing var: {e:#}");
     assert!(format!("{e:#}").contains("nothere"));
-    let e = host_tests::mat::parse_vars("t=a,u=b").unwrap_err();
+    let e = host_tests::io::mat::parse_vars("t=a,u=b").unwrap_err();
     assert!(format!("{e:#}").contains("must name t, u and y"));
     // Mismatched lengths.
-    let bytes2 = host_tests::mat::write_v5(&[("t", &rec.t_s), ("u", &rec.u_v[1..]), ("y", &y)]);
-    let e = host_tests::mat::parse_record(&bytes2, "t=t,u=u,y=y").unwrap_err();
+    let bytes2 = host_tests::io::mat::write_v5(&[("t", &rec.t_s), ("u", &rec.u_v[1..]), ("y", &y)]);
+    let e = host_tests::io::mat::parse_record(&bytes2, "t=t,u=u,y=y").unwrap_err();
     println!("mismatched: {e:#}");
     assert!(format!("{e:#}").contains("different lengths"));
     // Truncated and random bytes never panic.
     let mut rng = rand::rngs::StdRng::seed_from_u64(5);
     for cut in (0..bytes.len()).step_by(97) {
-        let _ = host_tests::mat::parse_record(&bytes[..cut], "t=time,u=uin,y=ymeas");
+        let _ = host_tests::io::mat::parse_record(&bytes[..cut], "t=time,u=uin,y=ymeas");
     }
     for _ in 0..200 {
         let mut b = bytes.clone();
@@ -551,7 +552,7 @@ fn mat_records_read_and_refuse_garbage() {
             let i = rng.gen_range(0..b.len());
             b[i] = rng.r#gen();
         }
-        let _ = host_tests::mat::parse_record(&b, "t=time,u=uin,y=ymeas");
+        let _ = host_tests::io::mat::parse_record(&b, "t=time,u=uin,y=ymeas");
     }
 }
 

@@ -6,7 +6,7 @@
 use host_tests::identify::hysteresis::{
     ForcProtocol, forc_protocol, identify_hysteresis, turning_points,
 };
-use host_tests::reference::hysteresis_truth::PlayOperatorTruth;
+use host_tests::oracle::hysteresis_truth::PlayOperatorTruth;
 use model_core::hysteresis::{HysteresisMemory, HysteresisTable, MEMORY_DEPTH};
 use model_core::limits::Flags;
 use model_core::params;

@@ -2,17 +2,16 @@
 //! record synthesised from `thesis-full` (1 mV noise), the hysteresis identified into the base
 //! model, and the identified model checked on an input it was not identified on.
 
-use host_tests::identify_cmd::hysteresis_into;
-use host_tests::model_file::ModelFile;
-use host_tests::simulate::simulate;
-use host_tests::synth::{Protocol, SynthArgs, synth};
+use host_tests::identify::into_model::hysteresis_into;
+use host_tests::io::model_file::ModelFile;
+use host_tests::sim::open_loop::simulate;
+use host_tests::sim::synth::{Protocol, SynthSpec, synth};
 
-fn args(protocol: Protocol) -> SynthArgs {
-    SynthArgs {
+fn args(protocol: Protocol) -> SynthSpec {
+    SynthSpec {
         model: "thesis-full".into(),
         protocol,
         seed: 5,
-        output: "unused.csv".into(),
         seconds: 4.0,
         rate: 1000.0,
         amplitude: 10.0,
@@ -36,7 +35,7 @@ fn hysteresis_identified_from_a_forc_record_reproduces_the_stage() {
     // Round trip through the TOML text as the command line would.
     let model = ModelFile::parse(&model.to_toml().unwrap()).unwrap();
     // Unseen input: a 0.5 Hz, 0-8 V triangle, both models noise-free.
-    let tri = synth(&SynthArgs {
+    let tri = synth(&SynthSpec {
         freq: 0.5,
         amplitude: 8.0,
         noise_v: Some(0.0),

@@ -1,7 +1,7 @@
 //! The lag compensator (model-core, f32) against the independent f64 reference, and its
 //! limits: anti-windup, slew, NaN.
 
-use host_tests::reference::lag::RefLag;
+use host_tests::oracle::lag::RefLag;
 use model_core::DacCode;
 use model_core::lag::{LagCompensator, LagConfig, LagState};
 use model_core::limits::Flags;

@@ -1,8 +1,8 @@
 //! Issue #3: the pre-filter against its `f64` reference, the tracking it buys, the delay
 //! alternatives, the choice of tau, the reference generators and `piezo track`'s checks.
-use host_tests::analysis::fundamental;
-use host_tests::reference::prefilter::RefPreFilter;
-use host_tests::track::{TrackShape, TrackSpec, simulate, validate};
+use host_tests::oracle::prefilter::RefPreFilter;
+use host_tests::sim::analysis::fundamental;
+use host_tests::sim::tracking::{TrackShape, TrackSpec, simulate, validate};
 use model_core::codes::DacCode;
 use model_core::lag::LagConfig;
 use model_core::plant::LinearPlantConfig;
@@ -123,7 +123,7 @@ fn step_response_matches_the_f64_reference() {
     }
 }
 
-fn run(shape: TrackShape, f: f64, mode: PreFilterMode) -> host_tests::track::TrackRun {
+fn run(shape: TrackShape, f: f64, mode: PreFilterMode) -> host_tests::sim::tracking::TrackRun {
     simulate(&TrackSpec::new(shape, f, 3.0, 4.0, mode), false).unwrap()
 }
 

@@ -1,7 +1,7 @@
 //! The on-target tests' reference vectors (`firmware/qemu/tests/vectors/mod.rs`) are what the
 //! host's f64 references produce now, and the references themselves hold what the vectors
 //! claim: the lag vector stays inside the window and the codes saturate at the rails.
-use host_tests::qemu_vectors as v;
+use host_tests::qemu::vectors as v;
 use model_core::params;
 
 #[test]

@@ -2,8 +2,8 @@
 //! never a panic (fuzzed with proptest); the writer round-trips; built-in models round-trip
 //! through TOML.
 
-use host_tests::model_file::ModelFile;
-use host_tests::record::{Record, RecordError};
+use host_tests::io::csv::{Record, RecordError};
+use host_tests::io::model_file::ModelFile;
 use proptest::prelude::*;
 
 fn err(text: &str) -> String {

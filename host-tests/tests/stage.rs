@@ -3,9 +3,9 @@
 //! feedforward, and drift identification from a synthesised step record.
 
 use host_tests::identify::drift::identify_drift;
-use host_tests::reference::drift::{DriftRef, step_response};
-use host_tests::reference::stage::{RefSwitches, StageRef};
-use host_tests::simulate::simulate;
+use host_tests::oracle::drift::{DriftRef, step_response};
+use host_tests::oracle::stage::{RefSwitches, StageRef};
+use host_tests::sim::open_loop::simulate;
 use model_core::drift::{Drift, DriftConfig, DriftState};
 use model_core::gain::{FastGain, FastGainConfig};
 use model_core::hysteresis::{HysteresisMemory, HysteresisTable};
@@ -213,7 +213,7 @@ fn output_settles_to_the_static_map() {
         for _ in 0..(0.05 / T) as usize {
             y = stage.step(&mut s, u);
         }
-        let want = host_tests::reference::gain::fast_output(DacCode::from_volts(u).volts() as f64);
+        let want = host_tests::oracle::gain::fast_output(DacCode::from_volts(u).volts() as f64);
         println!("u {u} V: y {y:.6} V after 50 ms, reference fast map {want:.6} V");
         assert!(((y as f64) - want).abs() < 2e-5);
     }

@@ -16,7 +16,7 @@
 //! Every candidate is then checked the same way: the whole augmented model is simulated on
 //! every record by [`model_core::stage::Stage`] (never by a second simulator) and scored.
 
-use crate::model_file::{
+use crate::io::model_file::{
     DelaySection, DriftSection, GainSection, ModelFile, PlaySection, PoleSection, ResonanceSection,
     SaturationSection, SlewSection,
 };

@@ -3,8 +3,9 @@
 //!
 //! # The loop
 //! 1. **Simulate** every record with the current model ([`model_core::stage::Stage`] at the
-//!    model's own fixed step, the record's input held between samples: [`crate::simulate`]),
-//!    without sensor noise, and take the residual `y_measured - y_simulated`.
+//!    model's own fixed step, the record's input held between samples:
+//!    [`crate::sim::open_loop`]), without sensor noise, and take the residual
+//!    `y_measured - y_simulated`.
 //! 2. **Noise floor** of each record, from the data alone: the median absolute second
 //!    difference of `y` (robust to the few edges; `1.4826 MAD / sqrt(6)` is the standard
 //!    deviation of white noise), on the samples at least 10 ms after the last input change
@@ -30,13 +31,15 @@
 //! together; refitting every present slow effect with each new one limits that.
 
 pub mod catalogue;
+pub mod demo;
 pub mod protocol;
 pub mod report;
 pub mod signatures;
 
-use crate::model_file::ModelFile;
-use crate::record::Record;
-use crate::simulate::simulate;
+use crate::io::csv::Record;
+use crate::io::model_file::ModelFile;
+use crate::sim::open_loop::simulate;
+use crate::util::{golden, golden_n, median, par_map};
 use anyhow::{Context, bail, ensure};
 use catalogue::{EFFECTS, FAST, SLOW, SlowParams};
 use model_core::params;
@@ -328,60 +331,12 @@ pub fn noise_floor(d: &Data) -> f64 {
     1.4826 * median(&mut v) / 6f64.sqrt()
 }
 
-/// The median (reorders `v`); 0 for an empty slice.
-pub fn median_pub(v: &mut [f64]) -> f64 {
-    median(v)
-}
-
-fn median(v: &mut [f64]) -> f64 {
-    if v.is_empty() {
-        return 0.0;
-    }
-    let m = v.len() / 2;
-    v.select_nth_unstable_by(m, |a, b| a.total_cmp(b));
-    v[m]
-}
-
 /// Simulate `model` (without sensor noise) on a record.
 pub fn sim(model: &ModelFile, d: &Data) -> anyhow::Result<Vec<f64>> {
     let mut m = model.clone();
     m.converters.noise_v = 0.0;
     let stage = m.build_stage()?;
     Ok(simulate(&stage, m.period_s, &d.t_s, &d.u_v))
-}
-
-/// Apply `f` to every item on all cores (`std::thread::scope`), keeping the order.
-pub fn par_map<T: Sync, R: Send>(items: &[T], f: impl Fn(&T) -> R + Sync) -> Vec<R> {
-    let threads = std::thread::available_parallelism()
-        .map_or(1, |n| n.get())
-        .min(items.len())
-        .max(1);
-    if threads == 1 {
-        return items.iter().map(&f).collect();
-    }
-    let next = std::sync::atomic::AtomicUsize::new(0);
-    let mut out: Vec<Option<R>> = (0..items.len()).map(|_| None).collect();
-    let results = std::sync::Mutex::new(Vec::new());
-    std::thread::scope(|s| {
-        for _ in 0..threads {
-            s.spawn(|| {
-                loop {
-                    let i = next.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-                    let Some(item) = items.get(i) else { break };
-                    let r = f(item);
-                    if let Ok(mut v) = results.lock() {
-                        v.push((i, r));
-                    }
-                }
-            });
-        }
-    });
-    for (i, r) in results.into_inner().unwrap_or_default() {
-        if let Some(slot) = out.get_mut(i) {
-            *slot = Some(r);
-        }
-    }
-    out.into_iter().flatten().collect()
 }
 
 /// A pruning trial: effect, model without it, its simulations and mean squares.
@@ -902,36 +857,6 @@ fn fit_fast(
     let m = catalogue::with_fast(model, effect, xbest, z);
     let c = cost(&m);
     c.is_finite().then_some((m, c))
-}
-
-/// Golden-section minimum of `f` on `[lo, hi]` clipped to `[a, b]` (20 evaluations).
-fn golden(lo: f64, hi: f64, a: f64, b: f64, f: impl Fn(f64) -> f64) -> f64 {
-    golden_n(lo, hi, a, b, 18, f)
-}
-
-/// [`golden`] with `iters` reductions of the bracket (`iters + 2` evaluations).
-fn golden_n(lo: f64, hi: f64, a: f64, b: f64, iters: usize, f: impl Fn(f64) -> f64) -> f64 {
-    let (mut lo, mut hi) = (lo.max(a), hi.min(b));
-    let r = 0.5 * (5f64.sqrt() - 1.0);
-    let mut x1 = hi - r * (hi - lo);
-    let mut x2 = lo + r * (hi - lo);
-    let (mut f1, mut f2) = (f(x1), f(x2));
-    for _ in 0..iters {
-        if f1 < f2 {
-            hi = x2;
-            x2 = x1;
-            f2 = f1;
-            x1 = hi - r * (hi - lo);
-            f1 = f(x1);
-        } else {
-            lo = x1;
-            x1 = x2;
-            f1 = f2;
-            x2 = lo + r * (hi - lo);
-            f2 = f(x2);
-        }
-    }
-    if f1 < f2 { x1 } else { x2 }
 }
 
 /// The slow effects' regressors at every record's samples (they depend on the input only).
@@ -1609,7 +1534,7 @@ pub fn load_data(paths: &[std::path::PathBuf], vars: Option<&str>) -> anyhow::Re
         );
         let is_mat = p.extension().is_some_and(|e| e.eq_ignore_ascii_case("mat"));
         let rec = if is_mat {
-            crate::mat::read_record(p, vars.unwrap_or("t=t,u=u,y=y"))?
+            crate::io::mat::read_record(p, vars.unwrap_or("t=t,u=u,y=y"))?
         } else {
             Record::read(p).with_context(|| format!("record {}", p.display()))?
         };

@@ -17,6 +17,11 @@
 //! The stage starts at rest at 0 V in both (hold the input at 0 V for a minute before the slow
 //! record).
 
+use crate::io::csv::Record;
+use crate::io::model_file::ModelFile;
+use crate::sim::open_loop::simulate;
+use std::path::{Path, PathBuf};
+
 /// Levels of the fast record's steps, volts at the amplifier input.
 pub const FAST_LEVELS_V: [f64; 10] = [1.0, 3.0, 2.5, 6.0, 4.0, 9.0, 8.5, 2.0, 0.5, 5.0];
 
@@ -86,41 +91,54 @@ pub fn slow_input(rate_hz: f64, seconds: f64) -> (Vec<f64>, Vec<f64>) {
     (t, u)
 }
 
-/// `piezo synth --protocol identification --output FILE.csv`: writes `FILE-fast.csv` (50 kHz,
-/// 0.2 s) and `FILE-slow.csv` (1 kHz, `--seconds` long, at least 20 s) from the model, with its
-/// noise (or `--noise-v`) and `--seed`.
-pub fn synth_identification(a: &crate::synth::SynthArgs) -> anyhow::Result<()> {
-    use crate::model_file::ModelFile;
-    use crate::record::Record;
+/// The two records of the protocol from `model`, with its sensor noise and seed: `("fast",
+/// 50 kHz, 0.2 s)` and `("slow", 1 kHz, slow_seconds)`, simulated by the same stage in that
+/// order.
+pub fn records(
+    model: &ModelFile,
+    slow_seconds: f64,
+) -> anyhow::Result<Vec<(&'static str, Record)>> {
+    let stage = model.build_stage()?;
+    let mut out = Vec::with_capacity(2);
+    for (tag, (t, u)) in [
+        ("fast", fast_input(model_core::params::SAMPLE_RATE_HZ, 0.2)),
+        ("slow", slow_input(1_000.0, slow_seconds)),
+    ] {
+        let y = simulate(&stage, model.period_s, &t, &u);
+        out.push((tag, Record::new(t, u, Some(y), None)?));
+    }
+    Ok(out)
+}
+
+/// `piezo synth --protocol identification --output FILE.csv`: the records for `FILE-fast.csv`
+/// (50 kHz, 0.2 s) and `FILE-slow.csv` (1 kHz, `seconds` long, at least 20 s) from the model
+/// file or built-in `model`, with its noise (or `noise_v`) and `seed` ([`record_path`] names
+/// the files).
+pub fn synth_identification(
+    model: &str,
+    seed: u64,
+    noise_v: Option<f64>,
+    seconds: f64,
+) -> anyhow::Result<Vec<(&'static str, Record)>> {
     anyhow::ensure!(
-        a.seconds.is_finite() && (20.0..=3600.0).contains(&a.seconds.max(20.0)),
+        seconds.is_finite() && (20.0..=3600.0).contains(&seconds.max(20.0)),
         "--seconds (the slow record's length) must be within 20..3600 s"
     );
-    let mut model = ModelFile::load(&a.model)?;
-    model.converters.seed = a.seed;
-    if let Some(n) = a.noise_v {
+    let mut model = ModelFile::load(model)?;
+    model.converters.seed = seed;
+    if let Some(n) = noise_v {
         anyhow::ensure!(
             n.is_finite() && (0.0..=1.0).contains(&n),
             "--noise-v must be within 0..1 V"
         );
         model.converters.noise_v = n;
     }
-    let stage = model.build_stage()?;
-    let stem = a.output.with_extension("");
-    let slow_s = a.seconds.max(20.0);
-    for (tag, (t, u)) in [
-        ("fast", fast_input(model_core::params::SAMPLE_RATE_HZ, 0.2)),
-        ("slow", slow_input(1_000.0, slow_s)),
-    ] {
-        let y = crate::simulate::simulate(&stage, model.period_s, &t, &u);
-        let rec = Record::new(t, u, Some(y), None)?;
-        let path = std::path::PathBuf::from(format!("{}-{tag}.csv", stem.display()));
-        rec.write(&path)?;
-        eprintln!(
-            "wrote {} samples ({tag} record) to {}",
-            rec.len(),
-            path.display()
-        );
-    }
-    Ok(())
+    records(&model, seconds.max(20.0))
+}
+
+/// Where `piezo synth --protocol identification --output FILE.csv` writes the record `tag`:
+/// `FILE-<tag>.csv`.
+pub fn record_path(output: &Path, tag: &str) -> PathBuf {
+    let stem = output.with_extension("");
+    PathBuf::from(format!("{}-{tag}.csv", stem.display()))
 }

@@ -7,7 +7,7 @@
 //!   fast record (delay, pole, slew), the residual spectrum (resonance).
 
 use super::{Data, Diagnosis};
-use crate::model_file::ModelFile;
+use crate::io::model_file::ModelFile;
 use anyhow::Context;
 use plotters::prelude::*;
 use std::fmt::Write as _;

@@ -22,7 +22,7 @@
 //! selection uses, [`Signatures::describe`] into words for the table.
 
 use super::{Data, LINE_RATIO_MIN, MAX_MODE_DAMPING, catalogue};
-use crate::model_file::ModelFile;
+use crate::io::model_file::ModelFile;
 use model_core::params;
 use rustfft::{FftPlanner, num_complex::Complex};
 
@@ -228,7 +228,7 @@ fn median_above_500(spec: &[(f64, f64)]) -> f64 {
         .filter(|(f, _)| *f >= 500.0)
         .map(|x| x.1)
         .collect();
-    super::median_pub(&mut mags).max(1e-15)
+    crate::util::median(&mut mags).max(1e-15)
 }
 
 /// The frequency of the strongest line of `spec` above 500 Hz (0 if none); its height is

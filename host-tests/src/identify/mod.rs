@@ -4,6 +4,8 @@
 //! * [`drift`]: the three drift lags (eq. 5.1) from a step record.
 //! * [`hysteresis`]: the Everett table from a first-order-reversal-curve record (sec. 5.3.4),
 //!   and the generator of that protocol's input.
+//! * [`into_model`]: either written into a model file (`piezo identify`).
 
 pub mod drift;
 pub mod hysteresis;
+pub mod into_model;

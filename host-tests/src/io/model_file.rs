@@ -362,7 +362,7 @@ impl ModelFile {
     pub fn to_toml(&self) -> anyhow::Result<String> {
         let body = toml::to_string(self).context("serialising the model")?;
         Ok(format!(
-            "# piezo model file (see host-tests/src/model_file.rs for every key).\n\
+            "# piezo model file (see host-tests/src/io/model_file.rs for every key).\n\
              # A table named after an effect switches it on.\n{body}"
         ))
     }

@@ -6,7 +6,7 @@
 //! `catch_unwind`, so a malformed file gives an error, never a panic. [`write_v5`] writes the
 //! plain (uncompressed, double) form, for tests and the demo.
 
-use crate::record::Record;
+use crate::io::csv::Record;
 use anyhow::{Context, bail, ensure};
 use matfile::{MatFile, NumericData};
 use std::path::Path;

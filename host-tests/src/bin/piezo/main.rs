@@ -1,6 +1,16 @@
-//! `piezo`: the command line. A thin shell: each verb parses its arguments and calls the
-//! library in `host_tests`.
+//! `piezo`: the command line. A thin shell: each verb (one file here) parses its arguments,
+//! calls the library in `host_tests` and prints.
 use clap::{Parser, Subcommand};
+
+mod demo;
+mod gap;
+mod identify;
+mod loop_cmd;
+mod qemu;
+mod record;
+mod simulate;
+mod synth;
+mod track;
 
 #[derive(Parser)]
 #[command(
@@ -10,43 +20,43 @@ use clap::{Parser, Subcommand};
 )]
 struct Cli {
     #[command(subcommand)]
-    command: Command,
+    verb: Verb,
 }
 
 #[derive(Subcommand)]
-enum Command {
+enum Verb {
     /// Closed-loop figures of the thesis loop (margins, bandwidth, step response).
-    Loop(host_tests::loop_cmd::LoopArgs),
+    Loop(loop_cmd::LoopArgs),
     /// The control code on Cortex-M4F/M7 under QEMU: scenarios, on-target tests, budget.
-    Qemu(host_tests::qemu::QemuArgs),
+    Qemu(qemu::QemuArgs),
     /// Tracking error of a periodic reference with and without the pre-filter.
-    Track(host_tests::track::TrackArgs),
+    Track(track::TrackArgs),
     /// Open-loop response of a model to a recorded input (writes t,u,y).
-    Simulate(host_tests::simulate::SimulateArgs),
+    Simulate(simulate::SimulateArgs),
     /// Measured-style records from a model, with noise.
-    Synth(host_tests::synth::SynthArgs),
+    Synth(synth::SynthArgs),
     /// Identify drift or hysteresis from a record and write a model file.
-    Identify(host_tests::identify_cmd::IdentifyArgs),
+    Identify(identify::IdentifyArgs),
     /// Capture a run on the board over its serial port and write it as CSV (t,u,y,r,flags).
-    Record(host_tests::record_cmd::RecordArgs),
+    Record(record::RecordArgs),
     /// Name the effects a model lacks from measured records, add them, show the gap shrink.
-    Gap(host_tests::gap_cmd::GapArgs),
+    Gap(gap::GapArgs),
     /// The model-gap workflow on records synthesised from a virtual stage (no board needed).
-    Demo(host_tests::demo::DemoArgs),
+    Demo(demo::DemoArgs),
 }
 
 fn main() -> std::process::ExitCode {
     let cli = Cli::parse();
-    let result = match cli.command {
-        Command::Loop(a) => host_tests::loop_cmd::run(&a),
-        Command::Qemu(a) => host_tests::qemu::run(&a),
-        Command::Track(a) => host_tests::track::run(&a),
-        Command::Simulate(a) => host_tests::simulate::run(&a),
-        Command::Synth(a) => host_tests::synth::run(&a),
-        Command::Identify(a) => host_tests::identify_cmd::run(&a),
-        Command::Record(a) => host_tests::record_cmd::run(&a),
-        Command::Gap(a) => host_tests::gap_cmd::run(&a),
-        Command::Demo(a) => host_tests::demo::run(&a),
+    let result = match cli.verb {
+        Verb::Loop(a) => loop_cmd::run(&a),
+        Verb::Qemu(a) => qemu::run(&a),
+        Verb::Track(a) => track::run(&a),
+        Verb::Simulate(a) => simulate::run(&a),
+        Verb::Synth(a) => synth::run(&a),
+        Verb::Identify(a) => identify::run(&a),
+        Verb::Record(a) => record::run(&a),
+        Verb::Gap(a) => gap::run(&a),
+        Verb::Demo(a) => demo::run(&a),
     };
     match result {
         Ok(()) => std::process::ExitCode::SUCCESS,

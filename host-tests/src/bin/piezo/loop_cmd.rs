@@ -1,7 +1,8 @@
 //! `piezo loop`: the closed-loop figures of the thesis loop (sec. 4.1.2), measured on the
-//! discrete loop of model-core's compensator and plant at the chosen rate and gain.
-use crate::analysis::{LoopSetup, loop_figures};
+//! discrete loop of model-core's compensator and plant at the chosen rate and gain
+//! ([`host_tests::sim::analysis`]).
 use clap::Args;
+use host_tests::sim::analysis::{LoopSetup, loop_figures};
 use model_core::params;
 
 /// Arguments of `piezo loop`.

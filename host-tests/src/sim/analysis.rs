@@ -11,7 +11,7 @@
 //! bandwidth comes the same way from the closed loop's `Y/R` with a sine reference, scanning up
 //! from 10 Hz to the first frequency where `|Y/R|` falls below `1/sqrt 2`.
 
-use crate::sim::LoopSim;
+use crate::sim::loop_sim::LoopSim;
 use model_core::lag::{LagCompensator, LagConfig, LagState};
 use model_core::limits::ConfigError;
 use model_core::plant::{LinearPlant, LinearPlantConfig};

@@ -1,17 +1,6 @@
-//! `piezo record --port DEV --seconds S --out FILE.csv`: capture a run on the board and write
-//! it as a CSV record (`t,u,y,r,flags`) that the model tools read.
-//!
-//! # The serial link
-//! The board's command line and capture stream share the ST-LINK virtual COM port. The port
-//! is opened as a plain file with `std` (no serial crate, no system library), so the line must
-//! be set up beforehand, raw and at the firmware's baud rate:
-//!
-//! ```text
-//! stty -F /dev/ttyACM0 921600 raw -echo min 0 time 1
-//! ```
-//! (`--baud 921600` runs exactly this `stty` line first, on Linux.) Raw mode matters: a
-//! terminal in canonical mode rewrites CR/LF and echoes bytes back to the board. Whatever the
-//! line does to the bytes, the frames' CRC-32 catches it and the frame is reported corrupted.
+//! The capture receiver (the library half of `piezo record --port DEV --seconds S --out
+//! FILE.csv`): capture a run on the board and write it as a CSV record (`t,u,y,r,flags`) that
+//! the model tools read. The serial line itself is [`super::link`].
 //!
 //! # The exchange
 //! 1. `capture Ns` arms the board (`ok capture armed N` or `err ...`);
@@ -26,48 +15,15 @@
 //!
 //! The exchange runs over the [`Link`] trait so the tests drive it with a simulated board.
 
-use std::fs::{File, OpenOptions};
-use std::io::{Read, Write};
-use std::path::{Path, PathBuf};
-use std::sync::mpsc;
+use std::fs::File;
+use std::io::Write;
+use std::path::Path;
 use std::time::{Duration, Instant};
 
+use crate::board::link::Link;
 use anyhow::{Context, bail};
-use clap::Args;
 use model_core::frame::{self, DecodeError, Decoded, Frame, Record};
 use model_core::{AdcCode, DacCode};
-
-/// Arguments of `piezo record`.
-#[derive(Args, Debug)]
-pub struct RecordArgs {
-    /// Serial device of the board (the ST-LINK virtual COM port), e.g. /dev/ttyACM0.
-    #[arg(long)]
-    pub port: PathBuf,
-    /// Seconds to record at the loop rate (the board holds 50000 samples: 1 s at 50 kHz).
-    #[arg(long)]
-    pub seconds: f64,
-    /// CSV file to write (columns t,u,y,r,flags).
-    #[arg(long)]
-    pub out: PathBuf,
-    /// Run `stty -F PORT BAUD raw -echo min 0 time 1` first (Linux); otherwise set the port up
-    /// yourself.
-    #[arg(long)]
-    pub baud: Option<u32>,
-    /// Seconds without any byte from the board before a step is given up.
-    #[arg(long, default_value_t = 5.0)]
-    pub timeout: f64,
-    /// How many times missing ranges are asked for again.
-    #[arg(long, default_value_t = 3)]
-    pub retries: u32,
-}
-
-/// A byte link to the board.
-pub trait Link {
-    /// Sends one command line (the line ending is added).
-    fn send_line(&mut self, line: &str) -> anyhow::Result<()>;
-    /// The bytes that arrive within `timeout` (empty if none).
-    fn recv(&mut self, timeout: Duration) -> anyhow::Result<Vec<u8>>;
-}
 
 /// How the transfer went.
 #[derive(Clone, Debug, Default, PartialEq, Eq)]
@@ -509,100 +465,5 @@ pub fn write_csv(rec: &Recording, path: &Path) -> anyhow::Result<()> {
     }
     std::fs::rename(&tmp, path)
         .with_context(|| format!("renaming {} to {}", tmp.display(), path.display()))?;
-    Ok(())
-}
-
-/// The serial port as a [`Link`]: a reader thread feeds a channel so reads can time out.
-struct SerialLink {
-    write: File,
-    rx: mpsc::Receiver<std::io::Result<Vec<u8>>>,
-}
-
-impl SerialLink {
-    fn open(port: &Path) -> anyhow::Result<Self> {
-        let f = OpenOptions::new()
-            .read(true)
-            .write(true)
-            .open(port)
-            .with_context(|| format!("opening {}", port.display()))?;
-        let mut reader = f.try_clone()?;
-        let (tx, rx) = mpsc::channel();
-        std::thread::spawn(move || {
-            let mut buf = [0u8; 4096];
-            loop {
-                match reader.read(&mut buf) {
-                    // `min 0 time 1`: a read returns 0 after 0.1 s of silence.
-                    Ok(0) => std::thread::sleep(Duration::from_millis(1)),
-                    Ok(n) => {
-                        if tx.send(Ok(buf[..n].to_vec())).is_err() {
-                            return;
-                        }
-                    }
-                    Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
-                    Err(e) => {
-                        let _ = tx.send(Err(e));
-                        return;
-                    }
-                }
-            }
-        });
-        Ok(Self { write: f, rx })
-    }
-}
-
-impl Link for SerialLink {
-    fn send_line(&mut self, line: &str) -> anyhow::Result<()> {
-        self.write.write_all(line.as_bytes())?;
-        self.write.write_all(b"\n")?;
-        self.write.flush()?;
-        Ok(())
-    }
-
-    fn recv(&mut self, timeout: Duration) -> anyhow::Result<Vec<u8>> {
-        match self.rx.recv_timeout(timeout) {
-            Ok(Ok(b)) => Ok(b),
-            Ok(Err(e)) => Err(e).context("reading the serial port"),
-            Err(mpsc::RecvTimeoutError::Timeout) => Ok(vec![]),
-            Err(mpsc::RecvTimeoutError::Disconnected) => bail!("the serial port closed"),
-        }
-    }
-}
-
-/// Run `piezo record`.
-pub fn run(a: &RecordArgs) -> anyhow::Result<()> {
-    if !(a.timeout.is_finite() && a.timeout > 0.0) {
-        bail!("--timeout must be a positive number of seconds");
-    }
-    if let Some(baud) = a.baud {
-        let status = std::process::Command::new("stty")
-            .arg("-F")
-            .arg(&a.port)
-            .args([&baud.to_string(), "raw", "-echo", "min", "0", "time", "1"])
-            .status()
-            .context("running stty")?;
-        if !status.success() {
-            bail!("stty could not set up {}", a.port.display());
-        }
-    }
-    let mut link = SerialLink::open(&a.port)?;
-    let opts = Options {
-        timeout: Duration::from_secs_f64(a.timeout),
-        retries: a.retries,
-        poll: Duration::from_millis(100),
-    };
-    let rec = record(&mut link, a.seconds, &opts)?;
-    write_csv(&rec, &a.out)?;
-    let r = &rec.report;
-    println!(
-        "wrote {} samples at {} Hz to {} ({} frames ok, {} corrupted, {} lost, {} duplicated, {} resend requests)",
-        rec.records.len(),
-        rec.rate_hz,
-        a.out.display(),
-        r.frames_ok,
-        r.frames_corrupted,
-        r.frames_lost,
-        r.frames_duplicated,
-        r.resend_requests
-    );
     Ok(())
 }

@@ -1,15 +1,16 @@
 //! `piezo gap --model BASE --data FILE [--data FILE ...] [--out MODEL.toml] [--report DIR]
-//! [--json] [--vars t=NAME,u=NAME,y=NAME]`: the model-gap workflow ([`crate::gap`]) from the
-//! command line.
+//! [--json] [--vars t=NAME,u=NAME,y=NAME]`: the model-gap workflow ([`host_tests::gap`]) from
+//! the command line.
 //!
-//! Records are CSV ([`crate::record`]) or MATLAB v5 `.mat` files ([`crate::mat`], variables
-//! named by `--vars`, default `t=t,u=u,y=y`). The table goes to stdout (or one JSON object
-//! with `--json`: `{"named", "steps": [{"effect", "evidence", "params", "rms_before_v",
-//! "rms_after_v"}], "noise_floor_v", "final_rms_v"}`), a progress bar to stderr.
+//! Records are CSV ([`host_tests::io::csv`]) or MATLAB v5 `.mat` files
+//! ([`host_tests::io::mat`], variables named by `--vars`, default `t=t,u=u,y=y`). The table
+//! goes to stdout (or one JSON object with `--json`: `{"named", "steps": [{"effect",
+//! "evidence", "params", "rms_before_v", "rms_after_v"}], "noise_floor_v", "final_rms_v"}`), a
+//! progress bar to stderr.
 
-use crate::gap::{Options, diagnose, load_data, report};
-use crate::model_file::ModelFile;
 use clap::Args;
+use host_tests::gap::{Options, diagnose, load_data, report};
+use host_tests::io::model_file::ModelFile;
 use std::path::PathBuf;
 
 /// Arguments of `piezo gap`.
@@ -38,7 +39,7 @@ pub struct GapArgs {
 /// Run `piezo gap`.
 pub fn run(a: &GapArgs) -> anyhow::Result<()> {
     if let Some(v) = &a.vars {
-        crate::mat::parse_vars(v)?;
+        host_tests::io::mat::parse_vars(v)?;
     }
     let base = ModelFile::load(&a.model)?;
     let data = load_data(&a.data, a.vars.as_deref())?;

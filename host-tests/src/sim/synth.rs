@@ -1,9 +1,12 @@
-//! `piezo synth --model MODEL --protocol forc|steps|triangle|sine|chirp --seed N --output FILE.csv`:
-//! measured-style records from any model, with its sensor noise (seeded) and converters.
+//! Measured-style records from any model, with its sensor noise (seeded) and converters: the
+//! library half of `piezo synth --model MODEL --protocol forc|steps|triangle|sine|chirp --seed N
+//! --output FILE.csv`. Each field of [`SynthSpec`] is the verb's flag of the same name, so the
+//! protocols are described by their flags below. (The verb's `identification` protocol writes
+//! two records and is the model-gap workflow's own, in `gap::protocol`.)
 //!
 //! The input is built at the record's rate (`--rate`) and simulated exactly as
-//! `piezo simulate` does ([`crate::simulate::simulate`]), so simulating the written record's
-//! `u` with the same model reproduces its `y` apart from the noise.
+//! `piezo simulate` does ([`crate::sim::open_loop::simulate`]), so simulating the written
+//! record's `u` with the same model reproduces its `y` apart from the noise.
 //!
 //! Protocols (all start at `--offset` and span `--amplitude` above it):
 //! * `steps`: `--offset` for the first tenth of `--hold` (at most 0.1 s), then a step to
@@ -19,17 +22,15 @@
 //!   10 V/s ramps; the record is as long as the protocol needs (`--seconds` is ignored).
 
 use crate::identify::hysteresis::{ForcProtocol, forc_protocol};
-use crate::model_file::ModelFile;
-use crate::record::Record;
-use crate::simulate::simulate;
+use crate::io::csv::Record;
+use crate::io::model_file::ModelFile;
+use crate::sim::open_loop::simulate;
 use anyhow::{bail, ensure};
-use clap::{Args, ValueEnum};
 use rand::{Rng, SeedableRng};
 use std::f64::consts::PI;
-use std::path::PathBuf;
 
-/// The input protocols.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+/// The input protocols of a single record.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Protocol {
     /// First-order reversal curves (sec. 5.3.4).
     Forc,
@@ -41,54 +42,38 @@ pub enum Protocol {
     Sine,
     /// Raised sine with a linear frequency sweep.
     Chirp,
-    /// The model-gap recording protocol: a fast and a slow record
-    /// (`crate::gap::protocol`; `--seconds` is the slow record's length, at least 20 s).
-    Identification,
 }
 
-/// Arguments of `piezo synth`.
-#[derive(Args, Debug, Clone)]
-pub struct SynthArgs {
+/// One synthetic record: the model, the protocol and its parameters.
+#[derive(Clone, Debug)]
+pub struct SynthSpec {
     /// Model file or built-in name (thesis-linear, thesis-full).
-    #[arg(long)]
     pub model: String,
     /// Input protocol.
-    #[arg(long, value_enum)]
     pub protocol: Protocol,
     /// Seed of the sensor noise and of random levels.
-    #[arg(long, default_value_t = 1)]
     pub seed: u64,
-    /// Output record (CSV t,u,y).
-    #[arg(long)]
-    pub output: PathBuf,
     /// Record length, seconds.
-    #[arg(long, default_value_t = 2.0)]
     pub seconds: f64,
     /// Record sampling rate, Hz.
-    #[arg(long, default_value_t = model_core::params::SAMPLE_RATE_HZ)]
     pub rate: f64,
     /// Span of the input above the offset, volts (forc: use 10 for the 0..10 V table).
-    #[arg(long, default_value_t = 6.0)]
     pub amplitude: f64,
     /// Lowest input, volts.
-    #[arg(long, default_value_t = 0.0)]
     pub offset: f64,
     /// Frequency of triangle/sine, start frequency of the chirp, Hz.
-    #[arg(long, default_value_t = 1.0)]
     pub freq: f64,
     /// End frequency of the chirp, Hz.
-    #[arg(long, default_value_t = 100.0)]
     pub freq_end: f64,
     /// Time per level of `steps`, seconds (default: the whole record, i.e. one step).
-    #[arg(long)]
     pub hold: Option<f64>,
     /// Sensor noise, volts 1-sigma (default: the model's).
-    #[arg(long)]
     pub noise_v: Option<f64>,
 }
 
-impl SynthArgs {
-    fn check(&self) -> anyhow::Result<()> {
+impl SynthSpec {
+    /// Checks the parameters; every refusal names the flag.
+    pub fn check(&self) -> anyhow::Result<()> {
         ensure!(
             self.seconds.is_finite() && self.seconds > 0.0 && self.seconds <= 3600.0,
             "--seconds must be within (0, 3600]"
@@ -137,7 +122,7 @@ impl SynthArgs {
 }
 
 /// The protocol's input at the record times `t_s`.
-pub fn input(a: &SynthArgs, t_s: &[f64]) -> anyhow::Result<Vec<f64>> {
+pub fn input(a: &SynthSpec, t_s: &[f64]) -> anyhow::Result<Vec<f64>> {
     let (o, amp, f) = (a.offset, a.amplitude, a.freq);
     Ok(match a.protocol {
         Protocol::Steps => {
@@ -176,15 +161,12 @@ pub fn input(a: &SynthArgs, t_s: &[f64]) -> anyhow::Result<Vec<f64>> {
                 .map(|&t| o + amp * 0.5 * (1.0 - (2.0 * PI * (f * t + 0.5 * k * t * t)).cos()))
                 .collect()
         }
-        Protocol::Identification => {
-            bail!("the identification protocol writes two records (see crate::gap::protocol)")
-        }
         Protocol::Forc => bail!("the forc protocol defines its own sample times"),
     })
 }
 
 /// Build the record `a` asks for.
-pub fn synth(a: &SynthArgs) -> anyhow::Result<Record> {
+pub fn synth(a: &SynthSpec) -> anyhow::Result<Record> {
     a.check()?;
     let mut model = ModelFile::load(&a.model)?;
     model.converters.seed = a.seed;
@@ -212,22 +194,4 @@ pub fn synth(a: &SynthArgs) -> anyhow::Result<Record> {
     };
     let y = simulate(&stage, model.period_s, &t_s, &u_v);
     Ok(Record::new(t_s, u_v, Some(y), None)?)
-}
-
-/// Run `piezo synth`.
-pub fn run(a: &SynthArgs) -> anyhow::Result<()> {
-    if a.protocol == Protocol::Identification {
-        return crate::gap::protocol::synth_identification(a);
-    }
-    let rec = synth(a)?;
-    rec.write(&a.output)?;
-    eprintln!(
-        "wrote {} samples ({} s at {} Hz, protocol {:?}) to {}",
-        rec.len(),
-        a.seconds,
-        a.rate,
-        a.protocol,
-        a.output.display()
-    );
-    Ok(())
 }

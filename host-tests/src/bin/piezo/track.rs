@@ -1,0 +1,134 @@
+//! `piezo track`: how well the loop follows a periodic reference, with feedback alone, with
+//! trajectory planning only, or with the full pre-filter ([`host_tests::sim::tracking`]).
+
+use clap::{Args, ValueEnum};
+use host_tests::sim::tracking::{TrackShape, TrackSpec, plot, simulate};
+use model_core::params;
+use model_core::prefilter::PreFilterMode;
+
+/// Shapes `piezo track` offers.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum ShapeArg {
+    /// `offset + amplitude sin(2 pi f t)`.
+    Sine,
+    /// Triangle between `offset - amplitude` and `offset + amplitude`.
+    Triangle,
+    /// Periodic steps (square wave) between `offset - amplitude` and `offset + amplitude`.
+    Step,
+}
+
+impl ShapeArg {
+    fn shape(self) -> TrackShape {
+        match self {
+            Self::Sine => TrackShape::Sine,
+            Self::Triangle => TrackShape::Triangle,
+            Self::Step => TrackShape::Step,
+        }
+    }
+}
+
+/// Pre-filter setting of `piezo track`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum PrefilterArg {
+    /// Feedback alone.
+    Off,
+    /// Reference through `1/(tau s + 1)^4` (with its preview).
+    Planning,
+    /// The full pre-filter `H'`.
+    On,
+}
+
+impl PrefilterArg {
+    fn mode(self) -> PreFilterMode {
+        match self {
+            Self::Off => PreFilterMode::Off,
+            Self::Planning => PreFilterMode::Planning,
+            Self::On => PreFilterMode::Full,
+        }
+    }
+}
+
+/// Arguments of `piezo track`.
+#[derive(Args, Debug)]
+pub struct TrackArgs {
+    /// Reference shape.
+    #[arg(long, value_enum, default_value_t = ShapeArg::Sine)]
+    pub shape: ShapeArg,
+    /// Frequency, Hz.
+    #[arg(long, default_value_t = 100.0, allow_negative_numbers = true)]
+    pub freq: f64,
+    /// Peak amplitude (half of peak-to-peak), sensor volts.
+    #[arg(long, default_value_t = 3.0, allow_negative_numbers = true)]
+    pub amplitude: f64,
+    /// Offset, sensor volts.
+    #[arg(long, default_value_t = 4.0, allow_negative_numbers = true)]
+    pub offset: f64,
+    /// Pre-filter: off (feedback alone), planning, on (full pre-filter).
+    #[arg(long, value_enum, default_value_t = PrefilterArg::On)]
+    pub prefilter: PrefilterArg,
+    /// Time constant of the four planning poles, seconds.
+    #[arg(long, default_value_t = params::PREFILTER_TAU_S, allow_negative_numbers = true)]
+    pub tau: f64,
+    /// Print one JSON object instead of a table.
+    #[arg(long)]
+    pub json: bool,
+    /// Draw reference, output and error of the measured periods to this SVG file.
+    #[arg(long)]
+    pub plot: Option<std::path::PathBuf>,
+}
+
+/// Run `piezo track`.
+pub fn run(a: &TrackArgs) -> anyhow::Result<()> {
+    let spec = TrackSpec::new(
+        a.shape.shape(),
+        a.freq,
+        a.amplitude,
+        a.offset,
+        a.prefilter.mode(),
+    )
+    .with_tau(a.tau);
+    let r = simulate(&spec, a.plot.is_some())?;
+    if let Some(path) = &a.plot {
+        // The last two periods of the measured ones.
+        let keep = ((2.0 / (a.freq * spec.lag.period_s)).ceil() as usize).min(r.trace.len());
+        let title = format!(
+            "{:?} {} Hz, {} V peak, pre-filter {:?}: last two periods",
+            a.shape, a.freq, a.amplitude, a.prefilter
+        );
+        plot(&r.trace[r.trace.len() - keep..], &title, path)?;
+    }
+    let f = r.figures;
+    if a.json {
+        println!("{}", serde_json::to_string(&f)?);
+        return Ok(());
+    }
+    println!(
+        "{:?} {} Hz, {} V peak around {} V, pre-filter {:?} (tau {} us, preview {} samples)",
+        a.shape,
+        a.freq,
+        a.amplitude,
+        a.offset,
+        a.prefilter,
+        a.tau * 1e6,
+        r.preview_samples
+    );
+    println!("{:<28}{:>14.3} mV", "RMS error", f.rms_error_v * 1e3);
+    println!("{:<28}{:>14.3} mV", "peak error", f.max_error_v * 1e3);
+    println!(
+        "{:<28}{:>14.3} V/ms",
+        "largest command slew", f.max_slew_v_per_ms
+    );
+    println!(
+        "{:<28}{:>14.4}",
+        "window-clamped fraction", f.dac_saturated_fraction
+    );
+    println!(
+        "{:<28}{:>14.4}",
+        "slew-limited fraction", r.slew_limited_fraction
+    );
+    println!(
+        "{:<28}{:>8.3} .. {:.3} V",
+        "command range", r.command_range_v.0, r.command_range_v.1
+    );
+    Ok(())
+}
