@@ -1,4 +1,6 @@
-//! The HTML report of `piezo gap --report DIR`: one `index.html` with inline SVG plots
+//! What a [`Diagnosis`] shows a person: the table `piezo gap` and `piezo demo` print
+//! ([`Diagnosis::table`]; the tests print it too, so it lives here, not in the verbs), and the
+//! HTML report of `piezo gap --report DIR`: one `index.html` with inline SVG plots
 //! (plotters) a person would look at:
 //! * measured vs simulated, base and final model, for every record;
 //! * the residual before and after each step, for every record;
@@ -6,12 +8,77 @@
 //!   (drift tails), static residual against input (gain curve), the first step edges of the
 //!   fast record (delay, pole, slew), the residual spectrum (resonance).
 
-use super::{Data, Diagnosis};
+use super::catalogue;
+use super::data::Data;
+use super::select::Diagnosis;
 use crate::io::model_file::ModelFile;
 use anyhow::Context;
 use plotters::prelude::*;
 use std::fmt::Write as _;
 use std::path::Path;
+
+impl Diagnosis {
+    /// The terminal table.
+    pub fn table(&self) -> String {
+        let mut s = String::new();
+        s.push_str(&format!(
+            "{:<4} {:<16} {:>12} {:>12}  {:<40} {}\n",
+            "step", "effect", "rms before", "rms after", "fitted parameters", "evidence"
+        ));
+        for (i, st) in self.steps.iter().enumerate() {
+            let p: Vec<String> = st
+                .params
+                .iter()
+                .map(|(k, v)| format!("{k}={}", fmt_num(v.as_f64().unwrap_or(f64::NAN))))
+                .collect();
+            s.push_str(&format!(
+                "{:<4} {:<16} {:>9.2} mV {:>9.2} mV  {:<40} {}\n",
+                i + 1,
+                format!(
+                    "{}{}",
+                    st.effect,
+                    if st.removed {
+                        " (removed)"
+                    } else if st.refit {
+                        " (refit)"
+                    } else {
+                        ""
+                    }
+                ),
+                1e3 * st.rms_before_v,
+                1e3 * st.rms_after_v,
+                p.join(" "),
+                st.evidence
+            ));
+        }
+        // The parameters of the final model: the slow effects are refitted together at every
+        // step, so a row's parameters are those of its own step.
+        for e in &self.named {
+            let p: Vec<String> = catalogue::params_of(&self.model, e)
+                .iter()
+                .map(|(k, v)| format!("{k}={}", fmt_num(*v)))
+                .collect();
+            s.push_str(&format!("final {e}: {}\n", p.join(" ")));
+        }
+        s.push_str(&format!(
+            "named: [{}]; noise floor {:.2} mV; final residual {:.2} mV ({:.2}x the floor)\n",
+            self.named.join(", "),
+            1e3 * self.noise_floor_v,
+            1e3 * self.final_rms_v,
+            self.final_rms_v / self.noise_floor_v.max(1e-12)
+        ));
+        s
+    }
+}
+
+fn fmt_num(v: f64) -> String {
+    let a = v.abs();
+    if a != 0.0 && !(1e-2..1e4).contains(&a) {
+        format!("{v:.3e}")
+    } else {
+        format!("{v:.4}")
+    }
+}
 
 const COLORS: [RGBColor; 6] = [
     RGBColor(31, 119, 180),

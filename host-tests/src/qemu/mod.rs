@@ -26,7 +26,7 @@
 //!
 //! * [`run`]: tools, builds and one QEMU run, the on-target suite;
 //! * [`scenarios`]: the scenario image's figures against the host's;
-//! * [`bench`]: the instruction budget;
+//! * [`mod@bench`]: the instruction budget;
 //! * [`vectors`]: the on-target tests' reference vectors from the [`crate::oracle`] models.
 
 pub mod bench;

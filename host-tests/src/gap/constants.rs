@@ -1,0 +1,53 @@
+//! The model-gap workflow's thresholds and limits, in one place. Each says whether it is our
+//! assumption and what it was calibrated on (mostly the hidden-effect tests of
+//! `tests/gap.rs`).
+
+/// Fraction of the residual power above the noise floor a candidate must explain to be added
+/// (our assumption, calibrated on the hidden-effect tests).
+pub const MIN_EXPLAINED: f64 = 0.1;
+/// The final check keeps a named effect only if taking it back out (and refitting the others)
+/// raises the residual RMS above the noise floor, in some record, by at least
+/// `PRUNE_RATIO + PRUNE_PER_PARAM * k` for an effect of `k` parameters (our assumption,
+/// calibrated on the hidden-effect tests): the greedy forward pass may pick an effect that a
+/// later one makes redundant, or one whose flexible form only mops up the misfit of another's
+/// form (a play-sum hysteresis absorbing what three lags leave of a logarithmic creep), so
+/// the bar rises with the effect's freedom.
+pub const PRUNE_RATIO: f64 = 1.5;
+/// See [`PRUNE_RATIO`].
+pub const PRUNE_PER_PARAM: f64 = 0.125;
+/// ... but an effect whose removal raises some record's residual power by more than this many
+/// noise variances (about 32x the noise RMS in quadrature) always stays (our assumption: the
+/// ratio test is for effects near the floor; on a record left far above it, such as the full
+/// thesis stage diagnosed from `thesis-linear`, removing the drift doubled a 134 mV residual,
+/// about 8600 variances, yet fell under its ratio bar, and the effects were pruned one after
+/// another. A time delay mopping up a Bouc-Wen misfit in the hidden-effect tests added about
+/// 150, so 100 was too low).
+pub const PRUNE_KEEP_EXCESS_VAR: f64 = 1000.0;
+/// Stop when every record's residual RMS is within this factor of its noise floor.
+pub const STOP_FLOOR_RATIO: f64 = 1.15;
+/// A fitted second mode is named only if the Welch-averaged residual spectrum has a line
+/// within 15 % of its frequency at least this many times its median level (our assumption,
+/// measured on the hidden-effect tests: true second modes stand 5.9-1450x, fits of a
+/// resonance to noise or to another effect's misfit 1.2-1.4x).
+pub const LINE_RATIO_MIN: f64 = 3.0;
+/// ... and only if its damping ratio is at most this (a line, not a lag; our assumption).
+pub const MAX_MODE_DAMPING: f64 = 0.25;
+/// The drift time constants' refinement stops when a pass of coordinate descent gains less
+/// than this much weighted residual power, V^2 (our assumption: 1e-4 of the power of 1 mV of
+/// noise; two passes, the earlier fixed count, left the demo at 2.5x its floor, eight reach
+/// 1.1x).
+pub const DRIFT_REFINE_TOL_V2: f64 = 1e-10;
+/// ... or after this many passes.
+pub const DRIFT_REFINE_PASSES: usize = 12;
+/// Rounds of the slow fit's structural refinement (K(u) of the drift, K'(u) on the play sum;
+/// measured: a second round left the demo, the thesis-full records and the hidden-effect
+/// tests unchanged and cost 40 % more time).
+pub const STRUCTURE_ROUNDS: usize = 1;
+/// At most this many steps.
+pub const MAX_STEPS: usize = 10;
+/// Fewest samples a record must have to show anything.
+pub const MIN_SAMPLES: usize = 200;
+/// Records at or above this rate are "fast" (edges resolved), volts... Hz.
+pub const FAST_RATE_HZ: f64 = 5_000.0;
+/// Samples within this time after an input jump are not used by the slow-effect solve.
+pub const SETTLE_S: f64 = 5e-3;

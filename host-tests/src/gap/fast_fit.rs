@@ -1,0 +1,92 @@
+//! The fit of a fast effect (time delay, amplifier pole, resonance, slew limit, saturation):
+//! a bounded search on the fast records, where these effects show. A coarse grid over the
+//! catalogue's bounds (log-spaced where [`super::catalogue::FastSpec::log`] says so; for a
+//! resonance, plus the residual spectrum's line and three damping ratios), then golden-section
+//! refinement ([`crate::util::golden`]). The cost is `sum_r n_r ln MSE_r` over the fast
+//! records, each candidate simulated with the whole current model.
+
+use super::catalogue;
+use super::data::{Data, mse, sim};
+use crate::io::model_file::ModelFile;
+use crate::util::golden;
+
+/// Fit a fast effect on the fast records: returns the model and its cost
+/// `sum n_r ln MSE_r` over those records.
+pub(super) fn fit_fast(
+    model: &ModelFile,
+    data: &[Data],
+    idx: &[usize],
+    effect: &str,
+    peak_hz: f64,
+) -> Option<(ModelFile, f64)> {
+    let spec = catalogue::fast_spec(effect)?;
+    let cost = |m: &ModelFile| -> f64 {
+        let mut c = 0.0;
+        for &i in idx {
+            match sim(m, &data[i]) {
+                Ok(s) => c += data[i].len() as f64 * mse(&data[i].y_v, &s).max(1e-14).ln(),
+                Err(_) => return f64::INFINITY,
+            }
+        }
+        c
+    };
+    let (x0, z0) = catalogue::fast_value(model, effect).unwrap_or((f64::NAN, 0.05));
+    let to = |x: f64| if spec.log { x.ln() } else { x };
+    let from = |x: f64| if spec.log { x.exp() } else { x };
+    let (a, b) = (to(spec.lo), to(spec.hi));
+    let mut z = if effect == "resonance" { z0 } else { 0.0 };
+    let grid = if effect == "resonance" { 32 } else { 16 };
+    let mut best = (f64::INFINITY, a);
+    let zs: Vec<f64> = if effect == "resonance" {
+        vec![0.02, 0.06, 0.15]
+    } else {
+        vec![z]
+    };
+    // The grid, plus (resonance) the residual's spectral line: localisation in frequency.
+    let mut xs: Vec<f64> = (0..=grid)
+        .map(|g| a + (b - a) * g as f64 / grid as f64)
+        .collect();
+    if effect == "resonance" && peak_hz > spec.lo && peak_hz < spec.hi {
+        for f in [0.88, 0.94, 1.0, 1.06, 1.12] {
+            xs.push(to((f * peak_hz).clamp(spec.lo, spec.hi)));
+        }
+    }
+    for &zz in &zs {
+        for &x in &xs {
+            let c = cost(&catalogue::with_fast(model, effect, from(x), zz));
+            if c < best.0 {
+                best = (c, x);
+                z = zz;
+            }
+        }
+    }
+    if x0.is_finite() {
+        let c = cost(&catalogue::with_fast(model, effect, x0, z0));
+        if c < best.0 {
+            best = (c, to(x0));
+            z = z0;
+        }
+    }
+    let h = (b - a) / grid as f64;
+    let x = golden(best.1 - h, best.1 + h, a, b, |x| {
+        cost(&catalogue::with_fast(model, effect, from(x), z))
+    });
+    let mut xbest = from(x);
+    if effect == "resonance" {
+        let lz = golden(
+            (z / 3.0).ln(),
+            (z * 3.0).ln(),
+            (0.005f64).ln(),
+            (0.5f64).ln(),
+            |lz| cost(&catalogue::with_fast(model, effect, xbest, lz.exp())),
+        );
+        z = lz.exp();
+        let x2 = golden(to(xbest) - h / 2.0, to(xbest) + h / 2.0, a, b, |x| {
+            cost(&catalogue::with_fast(model, effect, from(x), z))
+        });
+        xbest = from(x2);
+    }
+    let m = catalogue::with_fast(model, effect, xbest, z);
+    let c = cost(&m);
+    c.is_finite().then_some((m, c))
+}

@@ -1,0 +1,604 @@
+//! The joint fit of the slow effects (drift, hysteresis, non-linear gain): linear in their
+//! weights given a few shape constants, so one weighted least-squares solve on the settled
+//! samples of all records ([`SlowRegressors`]: the drift lags for each grid time constant, the
+//! play operators, the gain terms), with the drift's and the play operators' weights kept
+//! non-negative ([`super::nnls`]). The three drift time constants are chosen from a log grid
+//! by the same solve, then refined by coordinate descent ([`crate::util::golden_n`] on
+//! `log tau`); one round of structural refinement follows where the stage's form is not linear
+//! in the parameters (the drift's `K(u)`, `K'(u)` on the play sum).
+//!
+//! Records weigh equally (each record's normal equations are divided by its settled samples).
+
+use super::catalogue::{self, SlowParams};
+use super::constants::{DRIFT_REFINE_PASSES, DRIFT_REFINE_TOL_V2, SETTLE_S, STRUCTURE_ROUNDS};
+use super::data::Data;
+use super::nnls::{nnls_normal, ridge};
+use crate::util::golden_n;
+use model_core::params;
+use nalgebra::{DMatrix, DVector};
+
+/// The slow effects' regressors at every record's samples (they depend on the input only).
+pub struct SlowRegressors {
+    /// Per record: columns (drift lags for each grid time constant, play terms, gain terms).
+    cols: Vec<Vec<Vec<f64>>>,
+    /// Per record: is the sample settled (used by the solve)?
+    mask: Vec<Vec<bool>>,
+    /// Per record: the drift lags' input, `K(u) u` (`u` while K = 1).
+    drive: Vec<Vec<f64>>,
+}
+
+/// How the slow regressors are shaped by the slow effects' non-linear parameters (the
+/// structural refinement of [`fit_slow`]).
+#[derive(Clone, Copy, Debug, Default)]
+struct Shape {
+    /// K'(u) = 1 + c1 u + c2 u^2 multiplies the play sum (the stage scales the whole fast map).
+    kprime: Option<(f64, f64)>,
+    /// The drift's K(u): its lags see `K(u) u`.
+    kdrift: Option<[f64; 4]>,
+    /// The inputs' span: K and K' are held at its edges, as in the stage.
+    range: (f64, f64),
+}
+
+impl Shape {
+    fn kprime(&self, u: f64) -> f64 {
+        self.kprime.map_or(1.0, |(c1, c2)| {
+            let x = u.clamp(self.range.0, self.range.1);
+            1.0 + x * (c1 + x * c2)
+        })
+    }
+    fn drive(&self, u: f64) -> f64 {
+        self.kdrift.map_or(u, |k| {
+            let x = u.clamp(self.range.0, self.range.1);
+            (k[0] + x * (k[1] + x * (k[2] + x * k[3]))) * u
+        })
+    }
+}
+
+const N_TAU: usize = catalogue::DRIFT_TAU_GRID_S.len();
+const N_PLAY: usize = params::PLAY_OPERATORS;
+const COL_PLAY: usize = N_TAU;
+const COL_GAIN: usize = N_TAU + N_PLAY;
+const N_COLS: usize = N_TAU + N_PLAY + 2;
+
+pub(super) fn slow_regressors(data: &[Data]) -> SlowRegressors {
+    slow_regressors_shaped(data, &Shape::default())
+}
+
+#[allow(clippy::needless_range_loop)] // several arrays indexed together
+fn slow_regressors_shaped(data: &[Data], shape: &Shape) -> SlowRegressors {
+    let mut cols = Vec::new();
+    let mut mask = Vec::new();
+    let mut drives = Vec::new();
+    for d in data {
+        let n = d.len();
+        let t = d.period_s();
+        let drive: Vec<f64> = d.u_v.iter().map(|&u| shape.drive(u)).collect();
+        let mut c: Vec<Vec<f64>> = Vec::with_capacity(N_COLS);
+        for tau in catalogue::DRIFT_TAU_GRID_S {
+            // Exact ZOH first-order lag of the held drive, at rest at its first value.
+            let a = (-t / tau).exp();
+            let mut x = drive[0];
+            let mut v = Vec::with_capacity(n);
+            for i in 0..n {
+                v.push(x);
+                x = a * x + (1.0 - a) * drive[i];
+            }
+            c.push(v);
+        }
+        for r in params::PLAY_RADII_V {
+            let mut z = d.u_v[0];
+            c.push(
+                d.u_v
+                    .iter()
+                    .map(|&u| {
+                        z = z.max(u - r).min(u + r);
+                        (z - u) * shape.kprime(u)
+                    })
+                    .collect(),
+            );
+        }
+        c.push(d.u_v.iter().map(|u| params::PLANT_GAIN * u * u).collect());
+        c.push(
+            d.u_v
+                .iter()
+                .map(|u| params::PLANT_GAIN * u * u * u)
+                .collect(),
+        );
+        // Settled: no input jump (> 20 mV) within SETTLE_S before.
+        let settle = (SETTLE_S / t).ceil() as usize;
+        let mut m = vec![true; n];
+        let mut last_jump: Option<usize> = None;
+        for i in 0..n {
+            if i > 0 && (d.u_v[i] - d.u_v[i - 1]).abs() > 0.02 {
+                last_jump = Some(i);
+            }
+            if let Some(j) = last_jump
+                && i - j <= settle
+            {
+                m[i] = false;
+            }
+        }
+        cols.push(c);
+        mask.push(m);
+        drives.push(drive);
+    }
+    SlowRegressors {
+        cols,
+        mask,
+        drive: drives,
+    }
+}
+
+/// The slow effects in `set` fitted to the residual of the model without slow effects (`y0`):
+/// the linear fit ([`fit_slow_linear`]), then [`STRUCTURE_ROUNDS`] rounds of structural
+/// refinement where the stage's form is not linear in the parameters:
+/// * with `drift`: its K(u) (`k0 + k1 u + k2 u^2 + k3 u^3`, k0 = 1) from the three lags of
+///   `u^2, u^3, u^4` weighted by the fitted gains, then the lags refitted on `K(u) u`;
+/// * with `hysteresis` and `nonlinear-gain`: the play columns scaled by the fitted K'(u), as
+///   the stage scales the whole fast map (`K'(u) (0.79 u + h(u))`).
+///
+/// A refinement that fails (K(u) u not increasing, a singular solve) keeps the previous fit.
+///
+/// `u_range` is the range the model file gets for K(u) and K'(u) ([`catalogue::with_slow`]),
+/// so a K accepted here is one the stage accepts.
+pub(super) fn fit_slow(
+    data: &[Data],
+    y0: &[Vec<f64>],
+    x: &SlowRegressors,
+    set: &[&str],
+    u_range: (f64, f64),
+) -> Option<SlowParams> {
+    let mut p = fit_slow_linear(data, y0, x, set, None)?;
+    let couple = set.contains(&"hysteresis") && set.contains(&"nonlinear-gain");
+    let has_drift = set.contains(&"drift");
+    if !couple && !has_drift {
+        return Some(p);
+    }
+    let mut shape = Shape {
+        range: u_range,
+        ..Shape::default()
+    };
+    for _ in 0..STRUCTURE_ROUNDS {
+        if couple {
+            shape.kprime = p.gain;
+        }
+        if has_drift && let Some(k) = fit_drift_poly(data, y0, x, &shape, &p) {
+            shape.kdrift = Some(k);
+        }
+        let xs = slow_regressors_shaped(data, &shape);
+        match fit_slow_linear(data, y0, &xs, set, p.drift.map(|d| d.1)) {
+            Some(mut q) => {
+                q.drift_poly = shape.kdrift;
+                p = q;
+            }
+            None => break,
+        }
+    }
+    Some(p)
+}
+
+/// K(u) of the drift given the present fit `p` (gains, time constants; `shape`'s K' on the
+/// play columns): one weighted solve with the three lags of `u`, the lags of `c(u) u` for
+/// `c = u, u^2, u^3` weighted by the present gains (their coefficients are `k1..k3`), and the
+/// other slow effects' columns. `None` unless `K(u) u` comes out strictly increasing (the
+/// stage refuses it otherwise) and the solve is regular.
+#[allow(clippy::needless_range_loop)] // lags, powers and gains indexed together
+fn fit_drift_poly(
+    data: &[Data],
+    y0: &[Vec<f64>],
+    x: &SlowRegressors,
+    shape: &Shape,
+    p: &SlowParams,
+) -> Option<[f64; 4]> {
+    let (gains, taus) = p.drift?;
+    let plain = Shape {
+        kdrift: None,
+        ..*shape
+    };
+    let xs = slow_regressors_shaped(data, &plain);
+    let mut fixed: Vec<usize> = Vec::new();
+    if p.hysteresis.is_some() {
+        fixed.extend(COL_PLAY..COL_PLAY + N_PLAY);
+    }
+    if p.gain.is_some() {
+        fixed.extend([COL_GAIN, COL_GAIN + 1]);
+    }
+    let nf = fixed.len();
+    let np = 6 + nf;
+    let mut g = DMatrix::<f64>::zeros(np, np);
+    let mut b = DVector::<f64>::zeros(np);
+    let mut row = vec![0.0; np];
+    for (r, d) in data.iter().enumerate() {
+        let t = d.period_s();
+        let a = taus.map(|tau| (-t / tau).exp());
+        let x0 = |u: f64, pw: i32| u.clamp(shape.range.0, shape.range.1).powi(pw) * u;
+        // Lags of u (3) and of u^(j+1) for j = 1..3 (3 x 3), at rest at the first sample.
+        let mut lu = [d.u_v[0]; 3];
+        let mut lp = [[0.0f64; 3]; 3];
+        for (j, l) in lp.iter_mut().enumerate() {
+            *l = [x0(d.u_v[0], j as i32 + 1); 3];
+        }
+        let m = &x.mask[r];
+        let w = 1.0 / m.iter().filter(|v| **v).count().max(1) as f64;
+        for i in 0..d.len() {
+            if m[i] {
+                row[..3].copy_from_slice(&lu);
+                for j in 0..3 {
+                    row[3 + j] = (0..3).map(|k| gains[k] * lp[j][k]).sum();
+                }
+                for (c, &col) in fixed.iter().enumerate() {
+                    row[6 + c] = xs.cols[r][col][i];
+                }
+                let e = d.y_v[i] - y0[r][i];
+                for k in 0..np {
+                    b[k] += w * row[k] * e;
+                    for l in 0..=k {
+                        g[(k, l)] += w * row[k] * row[l];
+                    }
+                }
+            }
+            let u = d.u_v[i];
+            for k in 0..3 {
+                lu[k] = a[k] * lu[k] + (1.0 - a[k]) * u;
+                for j in 0..3 {
+                    lp[j][k] = a[k] * lp[j][k] + (1.0 - a[k]) * x0(u, j as i32 + 1);
+                }
+            }
+        }
+    }
+    for k in 0..np {
+        for l in 0..k {
+            g[(l, k)] = g[(k, l)];
+        }
+    }
+    ridge(&mut g);
+    let nonneg: Vec<bool> = (0..np)
+        .map(|k| k < 3 || (k >= 6 && is_nonneg_col(fixed[k - 6])))
+        .collect();
+    let beta = nnls_normal(&g, &b, &nonneg)?;
+    let k = [1.0, beta[3], beta[4], beta[5]];
+    let cfg = model_core::drift::DriftConfig {
+        gains,
+        taus_s: taus,
+        poly: k,
+        poly_range_v: shape.range,
+    };
+    (k.iter().all(|v| v.is_finite()) && cfg.validate().is_ok()).then_some(k)
+}
+
+/// The joint weighted least-squares fit of the slow effects in `set` to the residual of the
+/// model without slow effects (`y0`), linear in the parameters for the regressors' shape.
+/// Records weigh equally. Drift time constants: the best three of the grid, then refined.
+fn fit_slow_linear(
+    data: &[Data],
+    y0: &[Vec<f64>],
+    x: &SlowRegressors,
+    set: &[&str],
+    start: Option<[f64; 3]>,
+) -> Option<SlowParams> {
+    // Gram matrix of all columns and the target.
+    let mut g = DMatrix::<f64>::zeros(N_COLS, N_COLS);
+    let mut b = DVector::<f64>::zeros(N_COLS);
+    for (r, d) in data.iter().enumerate() {
+        let cols = &x.cols[r];
+        let m = &x.mask[r];
+        let n_used = m.iter().filter(|v| **v).count().max(1) as f64;
+        let w = 1.0 / n_used;
+        let mut gl = [[0.0f64; N_COLS]; N_COLS];
+        let mut bl = [0.0f64; N_COLS];
+        let mut row = [0.0f64; N_COLS];
+        for i in 0..d.len() {
+            if !m[i] {
+                continue;
+            }
+            let e = d.y_v[i] - y0[r][i];
+            for (k, c) in cols.iter().enumerate() {
+                row[k] = c[i];
+            }
+            for k in 0..N_COLS {
+                bl[k] += row[k] * e;
+                for l in 0..=k {
+                    gl[k][l] += row[k] * row[l];
+                }
+            }
+        }
+        for k in 0..N_COLS {
+            b[k] += w * bl[k];
+            for l in 0..=k {
+                g[(k, l)] += w * gl[k][l];
+                if l != k {
+                    g[(l, k)] += w * gl[k][l];
+                }
+            }
+        }
+    }
+    let solve = |idx: &[usize]| -> Option<(Vec<f64>, f64)> {
+        let p = idx.len();
+        let mut a = DMatrix::<f64>::zeros(p, p);
+        let mut v = DVector::<f64>::zeros(p);
+        for (i, &ki) in idx.iter().enumerate() {
+            v[i] = b[ki];
+            for (j, &kj) in idx.iter().enumerate() {
+                a[(i, j)] = g[(ki, kj)];
+            }
+        }
+        ridge(&mut a);
+        let nonneg: Vec<bool> = idx.iter().map(|&k| is_nonneg_col(k)).collect();
+        let beta = nnls_normal(&a, &v, &nonneg)?;
+        // Reduction of the weighted SSR (at the constrained optimum too: x' A x = x' b there).
+        let red = beta.dot(&v);
+        beta.iter()
+            .all(|x| x.is_finite())
+            .then(|| (beta.iter().copied().collect(), red))
+    };
+    let mut fixed: Vec<usize> = Vec::new();
+    if set.contains(&"hysteresis") {
+        fixed.extend(COL_PLAY..COL_PLAY + N_PLAY);
+    }
+    if set.contains(&"nonlinear-gain") {
+        fixed.extend([COL_GAIN, COL_GAIN + 1]);
+    }
+    let unpack = |idx: &[usize], beta: &[f64], taus: Option<[usize; 3]>| -> SlowParams {
+        let get = |k: usize| {
+            idx.iter()
+                .position(|&c| c == k)
+                .and_then(|p| beta.get(p).copied())
+                .unwrap_or(0.0)
+        };
+        SlowParams {
+            drift: taus.map(|t| {
+                (
+                    [get(t[0]), get(t[1]), get(t[2])],
+                    [
+                        catalogue::DRIFT_TAU_GRID_S[t[0]],
+                        catalogue::DRIFT_TAU_GRID_S[t[1]],
+                        catalogue::DRIFT_TAU_GRID_S[t[2]],
+                    ],
+                )
+            }),
+            hysteresis: set.contains(&"hysteresis").then(|| {
+                let mut w = [0.0; N_PLAY];
+                for (i, wi) in w.iter_mut().enumerate() {
+                    *wi = get(COL_PLAY + i);
+                }
+                w
+            }),
+            gain: set
+                .contains(&"nonlinear-gain")
+                .then(|| (get(COL_GAIN), get(COL_GAIN + 1))),
+            drift_poly: None,
+        }
+    };
+    if set.contains(&"drift") {
+        let mut best: Option<(f64, [usize; 3])> = None;
+        for i in 0..N_TAU {
+            for j in i + 1..N_TAU {
+                for k in j + 1..N_TAU {
+                    let mut idx = vec![i, j, k];
+                    idx.extend(&fixed);
+                    if let Some((beta, red)) = solve(&idx) {
+                        let ok = beta.iter().take(3).all(|g| g.abs() <= 1.0);
+                        if ok && best.as_ref().is_none_or(|b| red > b.0) {
+                            best = Some((red, [i, j, k]));
+                        }
+                    }
+                }
+            }
+        }
+        let (_, ti) = best?;
+        // Refine the three time constants continuously (golden section on log tau between
+        // the neighbouring grid values), each solve with the other columns.
+        let grid = catalogue::DRIFT_TAU_GRID_S;
+        let mut taus = ti.map(|i| grid[i]);
+        let problem = DriftProblem::new(data, y0, x, &fixed, &g, &b);
+        let eval = |taus: &[f64; 3]| -> f64 {
+            problem
+                .solve(taus)
+                .map_or(f64::NEG_INFINITY, |(beta, red)| {
+                    if beta.iter().take(3).all(|g| g.abs() <= 1.0) {
+                        red
+                    } else {
+                        f64::NEG_INFINITY
+                    }
+                })
+        };
+        // Coordinate descent: the valley is narrow (a shorter first lag and a play operator
+        // of small threshold trade against each other), so it runs until a pass gains less
+        // than DRIFT_REFINE_TOL_V2 of weighted residual power (at most DRIFT_REFINE_PASSES).
+        // A warm start (the previous round's time constants) replaces the grid's best when it
+        // explains more.
+        let mut cur_val = eval(&taus);
+        if let Some(t0) = start {
+            let v = eval(&t0);
+            if v > cur_val {
+                (taus, cur_val) = (t0, v);
+            }
+        }
+        for pass in 0..DRIFT_REFINE_PASSES {
+            let last = cur_val;
+            // The first pass searches a factor 3 either side, later ones 1.25 with fewer
+            // golden steps (the same final resolution, about 0.1 % of tau).
+            let (factor, iters) = if pass == 0 { (3.0, 18) } else { (1.25, 12) };
+            for m in 0..3 {
+                let lo = if m > 0 {
+                    taus[m - 1] * 1.05
+                } else {
+                    grid[0] * 0.5
+                };
+                let hi = if m < 2 {
+                    taus[m + 1] / 1.05
+                } else {
+                    grid[N_TAU - 1] * 2.0
+                };
+                // Also skips NaN bounds.
+                if lo.partial_cmp(&hi) != Some(std::cmp::Ordering::Less) {
+                    continue;
+                }
+                let a = lo.max(taus[m] / factor).ln();
+                let b = hi.min(taus[m] * factor).ln();
+                if a.partial_cmp(&b) != Some(std::cmp::Ordering::Less) {
+                    continue;
+                }
+                let cur = taus;
+                let lt = golden_n(a, b, a, b, iters, |lt| {
+                    let mut t = cur;
+                    t[m] = lt.exp();
+                    -eval(&t)
+                });
+                let mut t = cur;
+                t[m] = lt.exp();
+                let v = eval(&t);
+                if v > cur_val {
+                    (taus, cur_val) = (t, v);
+                }
+            }
+            if cur_val - last < DRIFT_REFINE_TOL_V2 {
+                break;
+            }
+        }
+        let (beta, _) = problem.solve(&taus)?;
+        if !beta.iter().take(3).all(|g| g.abs() <= 1.0) {
+            return None;
+        }
+        let mut p = unpack(&fixed, &beta[3..], None);
+        p.drift = Some(([beta[0], beta[1], beta[2]], taus));
+        Some(p)
+    } else {
+        if fixed.is_empty() {
+            return None;
+        }
+        let (beta, _) = solve(&fixed)?;
+        Some(unpack(&fixed, &beta, None))
+    }
+}
+
+/// Is regressor column `k` one whose coefficient is kept >= 0: a drift lag's or a play
+/// operator's? A stage creeps in the direction of its step (the thesis' three drift gains are
+/// positive); unconstrained, two lags of nearly equal time constants and opposite gains of
+/// +-0.45 make a band-pass that mimics hysteresis. With negative play weights the fitted loop
+/// could turn clockwise or the output run backwards after a reversal, which no stage does;
+/// unconstrained, a lone hysteresis fit soaks up drift and gain errors with weights of +-2.
+fn is_nonneg_col(k: usize) -> bool {
+    k < N_TAU || (COL_PLAY..COL_PLAY + N_PLAY).contains(&k)
+}
+
+/// The drift refinement's fixed part, computed once per [`fit_slow`] call: per record the
+/// target and the fixed columns at the settled samples (row-major, for cache locality), and
+/// the weighted Gram matrix of the fixed columns, so that each evaluation only runs the three
+/// lags and their cross products.
+struct DriftProblem<'a> {
+    data: &'a [Data],
+    /// Per record: the lags' input (`K(u) u`).
+    drive: &'a [Vec<f64>],
+    /// Per record: (weight, settled sample indices, target at them, fixed columns row-major).
+    recs: Vec<DriftRecord>,
+    /// The fixed columns (indices into the regressors).
+    fixed: Vec<usize>,
+    /// Number of fixed columns.
+    nf: usize,
+    /// Weighted Gram matrix of the fixed columns, and their weighted products with the target.
+    g_ff: DMatrix<f64>,
+    b_f: DVector<f64>,
+}
+
+/// One record of a [`DriftProblem`]: (weight, settled sample indices, target at them, fixed
+/// columns row-major).
+type DriftRecord = (f64, Vec<usize>, Vec<f64>, Vec<f64>);
+
+impl<'a> DriftProblem<'a> {
+    fn new(
+        data: &'a [Data],
+        y0: &[Vec<f64>],
+        x: &'a SlowRegressors,
+        fixed: &[usize],
+        g: &DMatrix<f64>,
+        b: &DVector<f64>,
+    ) -> Self {
+        let nf = fixed.len();
+        let recs = data
+            .iter()
+            .enumerate()
+            .map(|(r, d)| {
+                let idx: Vec<usize> = (0..d.len()).filter(|&i| x.mask[r][i]).collect();
+                let w = 1.0 / idx.len().max(1) as f64;
+                let e = idx.iter().map(|&i| d.y_v[i] - y0[r][i]).collect();
+                let mut f = Vec::with_capacity(idx.len() * nf);
+                for &i in &idx {
+                    f.extend(fixed.iter().map(|&c| x.cols[r][c][i]));
+                }
+                (w, idx, e, f)
+            })
+            .collect();
+        Self {
+            data,
+            drive: &x.drive,
+            recs,
+            fixed: fixed.to_vec(),
+            nf,
+            g_ff: DMatrix::from_fn(nf, nf, |i, j| g[(fixed[i], fixed[j])]),
+            b_f: DVector::from_fn(nf, |i, _| b[fixed[i]]),
+        }
+    }
+
+    /// The weighted solve with three drift lags of time constants `taus` and the fixed
+    /// columns: (coefficients, drift first; reduction of the weighted SSR).
+    fn solve(&self, taus: &[f64; 3]) -> Option<(Vec<f64>, f64)> {
+        let nf = self.nf;
+        let p = 3 + nf;
+        let mut g = DMatrix::<f64>::zeros(p, p);
+        let mut bv = DVector::<f64>::zeros(p);
+        g.view_mut((3, 3), (nf, nf)).copy_from(&self.g_ff);
+        bv.rows_mut(3, nf).copy_from(&self.b_f);
+        for ((d, drive), (w, idx, e, f)) in self.data.iter().zip(self.drive).zip(&self.recs) {
+            let t = d.period_s();
+            let a = taus.map(|tau| (-t / tau).exp());
+            let mut lag = [drive[0]; 3];
+            let mut ll = [[0.0f64; 3]; 3];
+            let mut lf = vec![0.0f64; 3 * nf];
+            let mut le = [0.0f64; 3];
+            let mut next = 0usize;
+            for (j, &i) in idx.iter().enumerate() {
+                // Advance the lags to sample i (their value there uses inputs before i).
+                while next < i {
+                    for k in 0..3 {
+                        lag[k] = a[k] * lag[k] + (1.0 - a[k]) * drive[next];
+                    }
+                    next += 1;
+                }
+                let row = &f[j * nf..(j + 1) * nf];
+                for k in 0..3 {
+                    le[k] += lag[k] * e[j];
+                    for l in 0..=k {
+                        ll[k][l] += lag[k] * lag[l];
+                    }
+                    let out = &mut lf[k * nf..(k + 1) * nf];
+                    for (o, v) in out.iter_mut().zip(row) {
+                        *o += lag[k] * v;
+                    }
+                }
+            }
+            for k in 0..3 {
+                bv[k] += w * le[k];
+                for l in 0..=k {
+                    g[(k, l)] += w * ll[k][l];
+                    if l != k {
+                        g[(l, k)] += w * ll[k][l];
+                    }
+                }
+                for c in 0..nf {
+                    g[(k, 3 + c)] += w * lf[k * nf + c];
+                    g[(3 + c, k)] += w * lf[k * nf + c];
+                }
+            }
+        }
+        ridge(&mut g);
+        let nonneg: Vec<bool> = (0..p)
+            .map(|k| k < 3 || is_nonneg_col(self.fixed[k - 3]))
+            .collect();
+        let beta = nnls_normal(&g, &bv, &nonneg)?;
+        let red = beta.dot(&bv);
+        beta.iter()
+            .all(|v| v.is_finite())
+            .then(|| (beta.iter().copied().collect(), red))
+    }
+}
