@@ -216,10 +216,13 @@ fn step_reference(n: u32) -> f32 {
     }
 }
 
-const FNV_OFFSET: u32 = 0x811c_9dc5;
+/// Start value of [`fnv1a`].
+pub const FNV_OFFSET: u32 = 0x811c_9dc5;
 const FNV_PRIME: u32 = 0x0100_0193;
 
-fn fnv1a(hash: u32, v: u16) -> u32 {
+/// FNV-1a of `hash` extended by the two bytes of `v` (little-endian): how
+/// [`Figures::dac_checksum`] hashes the DAC codes (offset binary).
+pub fn fnv1a(hash: u32, v: u16) -> u32 {
     let h = (hash ^ (v & 0xff) as u32).wrapping_mul(FNV_PRIME);
     (h ^ (v >> 8) as u32).wrapping_mul(FNV_PRIME)
 }

@@ -2,20 +2,25 @@
 //! crossover, closed-loop -3 dB bandwidth, step overshoot and settling time.
 //!
 //! # Method
-//! The open-loop response `L(e^{jwT})` is measured, not computed from formulas: model-core's
-//! compensator is driven by a cosine error of `amplitude_v`, its command goes through the
-//! 14-bit DAC, model-core's plant (with its 85 us delay), and the 16-bit ADC; the plant output's
-//! fundamental (single-bin DFT over whole periods after the transients) divided by the
-//! error's is `L`. The quantisers are in the path, so what is measured is the loop the board
-//! runs. The margins come from bisection on `|L| = 1` and on `arg(-L) = 0`. The closed-loop
+//! Every figure is measured on the one closed-loop harness ([`model_core::closed_loop`]): the
+//! board's [`Controller::step`] (pre-filter off: the figures are the feedback loop's own)
+//! around model-core's plant of eq. 4.4 (with its 85 us delay), through the 14-bit DAC and the
+//! 16-bit ADC, started at rest in an operating point ([`closed_loop::settled`]). The open-loop
+//! response `L(e^{jwT})` is measured by injection at the plant input, in the closed loop, as
+//! on a bench: a cosine `d` is added to the DAC's volts, the plant receives `x = u + d`, and the
+//! loop answers with the command `u = -L x`; `L = -U/X` from the fundamentals (single-bin DFT
+//! over whole periods after the transients). The quantisers and the controller's limits are in
+//! the path, so what is measured is the loop the board runs. The margins come from bisection on `|L| = 1` and on `arg(-L) = 0`. The closed-loop
 //! bandwidth comes the same way from the closed loop's `Y/R` with a sine reference, scanning up
 //! from 10 Hz to the first frequency where `|Y/R|` falls below `1/sqrt 2`.
 
-use crate::sim::loop_sim::LoopSim;
-use model_core::lag::{LagCompensator, LagConfig, LagState};
+use crate::sim::closed_loop;
+use model_core::closed_loop::{ClosedLoop, Converted, LinearStage, NoNoise};
+use model_core::controller::{Controller, ControllerConfig};
+use model_core::lag::LagConfig;
 use model_core::limits::ConfigError;
 use model_core::plant::{LinearPlant, LinearPlantConfig};
-use model_core::{AdcCode, DacCode};
+use model_core::prefilter::{PreFilterConfig, PreFilterMode};
 use rustfft::num_complex::Complex64;
 use std::f64::consts::PI;
 
@@ -45,9 +50,23 @@ impl LoopSetup {
         }
     }
 
-    /// Checks the configuration by building both blocks.
+    /// The board's controller for this loop: the thesis defaults with this compensator and
+    /// design plant, the pre-filter off (the figures are the feedback loop's own).
+    pub fn controller_config(&self) -> ControllerConfig {
+        ControllerConfig {
+            lag: self.lag,
+            plant: self.plant,
+            prefilter: PreFilterConfig {
+                mode: PreFilterMode::Off,
+                ..PreFilterConfig::default()
+            },
+            ..ControllerConfig::default()
+        }
+    }
+
+    /// Checks the configuration by building the controller and the plant.
     pub fn validate(&self) -> Result<(), ConfigError> {
-        LagCompensator::new(&self.lag)?;
+        Controller::new(&self.controller_config())?;
         LinearPlant::new(&self.plant)?;
         Ok(())
     }
@@ -87,36 +106,41 @@ fn whole_periods(w: f64, periods: f64) -> usize {
     ((2.0 * PI / w) * periods).round().max(1.0) as usize
 }
 
-/// Open-loop frequency response `L` at `omega_rad_s`, measured through the quantisers with a
-/// cosine error of `amplitude_v` around the operating point `u0_v`.
+/// The loop `piezo loop` measures: the board's controller with the pre-filter off (the
+/// figures are the feedback loop's own), at rest with the output at `y0_v`.
+fn settled_loop(setup: &LoopSetup, y0_v: f64) -> ClosedLoop<Converted<LinearStage, NoNoise>> {
+    let run = setup.controller_config();
+    let u0 = (y0_v / setup.plant.gain) as f32;
+    let stage = LinearStage::new(&setup.plant, u0).expect("validated");
+    closed_loop::settled(&run, stage, u0, y0_v as f32).expect("validated")
+}
+
+/// Open-loop frequency response `L` at `omega_rad_s`, measured by injection at the plant input
+/// in the closed loop: a cosine `d` of `amplitude_v` is added to the DAC's volts, `x = u + d`
+/// reaches the plant, and `L = -U/X` (the loop returns `-L x` as the command `u`). The loop
+/// runs at the operating point `u0_v` with the quantisers in the path: the loop the board
+/// runs, [`Controller::step`] included.
 pub fn open_loop_response(
     setup: &LoopSetup,
     omega_rad_s: f64,
     amplitude_v: f64,
     u0_v: f64,
 ) -> Complex64 {
-    let lag = LagCompensator::new(&setup.lag).expect("validated");
-    let plant = LinearPlant::new(&setup.plant).expect("validated");
-    let mut ls = LagState::new(u0_v as f32);
-    let mut ps = plant.steady_state(u0_v as f32);
+    let mut lp = settled_loop(setup, u0_v * setup.plant.gain);
     let w = omega_rad_s * setup.lag.period_s;
-    let settle = whole_periods(w, 20.0).max(2000);
+    let settle = whole_periods(w, 20.0).max(5000);
     let n = whole_periods(w, 40.0).max(4000);
-    let mut e_rec = Vec::with_capacity(n);
-    let mut y_rec = Vec::with_capacity(n);
+    let mut u_rec = Vec::with_capacity(n);
+    let mut x_rec = Vec::with_capacity(n);
     for k in 0..settle + n {
-        let e = amplitude_v * (w * k as f64).cos();
-        let y = AdcCode::from_volts(plant.output(&ps)).volts() as f64;
-        let u = lag.update(&mut ls, e as f32);
-        plant.step(&mut ps, DacCode::from_volts(u).volts());
+        lp.plant.injection_v = (amplitude_v * (w * k as f64).cos()) as f32;
+        let s = lp.step();
         if k >= settle {
-            // Same index on both: in the closed loop e[k] = r[k] - y[k], so the sample of
-            // computation delay (y[k] answers e up to k-1) belongs to L.
-            e_rec.push(e);
-            y_rec.push(y);
+            u_rec.push(s.sample.dac.volts() as f64);
+            x_rec.push(s.plant_input_v as f64);
         }
     }
-    fundamental(&y_rec, w) / fundamental(&e_rec, w)
+    -fundamental(&u_rec, w) / fundamental(&x_rec, w)
 }
 
 /// Closed-loop response `Y/R` at `f_hz` with a sine reference of `amplitude_v` around `y0_v`.
@@ -126,8 +150,7 @@ pub fn closed_loop_response(
     amplitude_v: f64,
     y0_v: f64,
 ) -> Complex64 {
-    let mut sim = LoopSim::new(&setup.lag, &setup.plant).expect("validated");
-    sim.settle_at(y0_v);
+    let mut lp = settled_loop(setup, y0_v);
     let w = 2.0 * PI * f_hz * setup.lag.period_s;
     let settle = whole_periods(w, 10.0).max(5000);
     let n = whole_periods(w, 20.0).max(5000);
@@ -135,10 +158,11 @@ pub fn closed_loop_response(
     let mut y_rec = Vec::with_capacity(n);
     for k in 0..settle + n {
         let r = y0_v + amplitude_v * (w * k as f64).sin();
-        let s = sim.step(r);
+        lp.state.set_reference(r as f32);
+        let s = lp.step();
         if k >= settle {
-            r_rec.push(r);
-            y_rec.push(s.output_v);
+            r_rec.push(s.sample.reference_v as f64);
+            y_rec.push(s.output_v as f64);
         }
     }
     fundamental(&y_rec, w) / fundamental(&r_rec, w)
@@ -166,28 +190,29 @@ fn bisect_log(mut lo: f64, mut hi: f64, f: impl Fn(f64) -> f64) -> Option<f64> {
     Some((lo * hi).sqrt())
 }
 
-/// Step response figures for a step of `step_v` from `y0_v`, simulated for `seconds`.
+/// Step response figures for a step of `step_v` from `y0_v`, simulated for `seconds`:
+/// overshoot in percent, settling time to 2 % in ms, and the trace (time s, output V).
 pub fn step_figures(
     setup: &LoopSetup,
     y0_v: f64,
     step_v: f64,
     seconds: f64,
 ) -> (f64, f64, Vec<(f64, f64)>) {
-    let mut sim = LoopSim::new(&setup.lag, &setup.plant).expect("validated");
-    sim.settle_at(y0_v);
+    let mut lp = settled_loop(setup, y0_v);
     let t = setup.lag.period_s;
     let n = (seconds / t) as usize;
     let target = y0_v + step_v;
+    lp.state.set_reference(target as f32);
     let mut peak = f64::MIN;
     let mut last_out = 0.0;
     let mut trace = Vec::with_capacity(n);
     for k in 0..n {
-        let s = sim.step(target);
-        peak = peak.max((s.output_v - y0_v) / step_v);
-        if ((s.output_v - target) / step_v).abs() > 0.02 {
+        let y = lp.step().output_v as f64;
+        peak = peak.max((y - y0_v) / step_v);
+        if ((y - target) / step_v).abs() > 0.02 {
             last_out = (k + 1) as f64 * t;
         }
-        trace.push((k as f64 * t, s.output_v));
+        trace.push((k as f64 * t, y));
     }
     let overshoot_pct = (peak - 1.0).max(0.0) * 100.0;
     (overshoot_pct, last_out * 1e3, trace)

@@ -3,22 +3,31 @@
 //! `piezo track`.
 //!
 //! # Simulation
-//! model-core all the way: [`ReferenceGenerator`] (with the preview the pre-filter asks for)
-//! -> [`PreFilter`] -> the closed loop of [`LoopSim`] (Tustin lag compensator, output limits,
-//! 14-bit DAC, plant of eq. 4.4 with its 85 us delay, 16-bit ADC, seeded Gaussian sensor
-//! noise of 1 mV by default) at 50 kHz. The tracking error is the generator's present value
-//! minus the true plant output (not the noisy measurement). After a warm-up of at least
-//! 0.2 s and 3 periods (the periodic steady state; the slow lag modes are settled out by
-//! starting the loop at rest at the first reference value), the figures are taken over whole
-//! periods: at least 0.1 s and 2 periods.
-use crate::sim::loop_sim::LoopSim;
+//! The one closed-loop harness ([`model_core::closed_loop`]), sample by sample the board's
+//! [`Controller::step`]: its on-board [`ReferenceGenerator`](model_core::reference::ReferenceGenerator) (with the preview the pre-filter
+//! asks for) -> [`PreFilter`] -> lag compensator (+ hysteresis feedforward when asked) ->
+//! output limits -> 14-bit DAC -> the stage -> the stage's sensor (seeded Gaussian noise, 1 mV
+//! by default, replacing the model's own) -> 16-bit ADC, at 50 kHz. The stage is any ch. 6
+//! model ([`TrackSpec::stage`]: `thesis-linear` by default, the plant of eq. 4.4 with its
+//! 85 us delay; `thesis-full` or a model file from the command line); the controller's
+//! pre-filter inverts the linear design plant ([`TrackSpec::plant`]) whatever the stage, as on
+//! the board. The tracking error is the generator's present value minus the true stage output
+//! (not the noisy measurement). The loop starts at rest at the first reference value
+//! ([`closed_loop::settled_stage`]: drift and hysteresis in their steady state, controller
+//! primed in open loop, then closed); after a warm-up of at least 0.2 s and 3 periods (the
+//! periodic steady state), the figures are taken over whole periods: at least 0.1 s and 2
+//! periods.
+use crate::sim::closed_loop;
 use anyhow::{Context, bail};
+use model_core::controller::{Controller, ControllerConfig, ReferenceSource};
+use model_core::hysteresis::HysteresisTable;
 use model_core::lag::LagConfig;
 use model_core::limits::Flags;
 use model_core::params;
 use model_core::plant::LinearPlantConfig;
 use model_core::prefilter::{DelayHandling, PreFilter, PreFilterConfig, PreFilterMode};
-use model_core::reference::{ReferenceConfig, ReferenceGenerator, Shape};
+use model_core::reference::{ReferenceConfig, Shape};
+use model_core::stage::StageConfig;
 
 /// Shapes of the tracking experiments.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -50,8 +59,14 @@ pub struct TrackSpec {
     pub seed: u64,
     /// Compensator.
     pub lag: LagConfig,
-    /// Plant.
+    /// The linear design plant the pre-filter inverts (the controller's model).
     pub plant: LinearPlantConfig,
+    /// The stage the loop drives (re-timed to the loop's period; its sensor noise is
+    /// [`Self::noise_v`]).
+    pub stage: StageConfig,
+    /// Add the hysteresis feedforward (the stage's own table if it has one, else the thesis
+    /// default table).
+    pub feedforward: bool,
 }
 
 impl TrackSpec {
@@ -76,6 +91,49 @@ impl TrackSpec {
             seed: 1,
             lag: LagConfig::default(),
             plant: LinearPlantConfig::default(),
+            stage: StageConfig::thesis_linear(),
+            feedforward: false,
+        }
+    }
+
+    /// The same on another stage.
+    pub fn with_stage(mut self, stage: StageConfig) -> Self {
+        self.stage = stage;
+        self
+    }
+
+    /// The same with the hysteresis feedforward on or off.
+    pub fn with_feedforward(mut self, on: bool) -> Self {
+        self.feedforward = on;
+        self
+    }
+
+    /// The controller this experiment runs: the board's, with this compensator, design plant,
+    /// pre-filter and feedforward, and the on-board generator as the reference.
+    pub fn controller_config(&self) -> ControllerConfig {
+        let shape = match self.shape {
+            TrackShape::Sine => Shape::Sine,
+            TrackShape::Triangle => Shape::Triangle,
+            TrackShape::Step => Shape::Square,
+        };
+        ControllerConfig {
+            lag: self.lag,
+            plant: self.plant,
+            prefilter: self.prefilter,
+            reference: ReferenceConfig {
+                shape,
+                offset_v: self.offset_v,
+                amplitude_v: self.amplitude_v,
+                freq_hz: self.freq_hz,
+                period_s: self.lag.period_s,
+            },
+            source: ReferenceSource::Generator,
+            hysteresis: self
+                .stage
+                .hysteresis
+                .unwrap_or_else(HysteresisTable::thesis_default),
+            hysteresis_ff: self.feedforward,
+            ..ControllerConfig::default()
         }
     }
 
@@ -181,29 +239,10 @@ pub fn validate(spec: &TrackSpec) -> anyhow::Result<()> {
 pub fn simulate(spec: &TrackSpec, record: bool) -> anyhow::Result<TrackRun> {
     validate(spec)?;
     let t = spec.lag.period_s;
-    let pf = PreFilter::new(&spec.lag, &spec.plant, &spec.prefilter)
-        .map_err(|e| anyhow::anyhow!("{e}"))?;
-    let shape = match spec.shape {
-        TrackShape::Sine => Shape::Sine,
-        TrackShape::Triangle => Shape::Triangle,
-        TrackShape::Step => Shape::Square,
-    };
-    let rc = ReferenceConfig {
-        shape,
-        offset_v: spec.offset_v,
-        amplitude_v: spec.amplitude_v,
-        freq_hz: spec.freq_hz,
-        period_s: t,
-    };
-    let gen_ =
-        ReferenceGenerator::new(&rc, pf.preview_samples()).map_err(|e| anyhow::anyhow!("{e}"))?;
-    let mut gs = gen_.start();
-    let mut sim = LoopSim::new(&spec.lag, &spec.plant)
-        .map_err(|e| anyhow::anyhow!("{e}"))?
-        .with_noise(spec.noise_v, spec.seed);
-    let r0 = gen_.now(&gs);
-    sim.settle_at(r0 as f64);
-    let mut ps = pf.settled_state(r0);
+    let cfg = spec.controller_config();
+    let controller = Controller::new(&cfg).map_err(|e| anyhow::anyhow!("{e}"))?;
+    let r0 = controller.generator.now(&controller.generator.start());
+    let mut lp = closed_loop::settled_stage(&cfg, &spec.stage, spec.noise_v, spec.seed, r0)?;
     let period_samples = 1.0 / (spec.freq_hz * t);
     let warm_periods = (0.2 * spec.freq_hz).ceil().max(3.0);
     let meas_periods = (0.1 * spec.freq_hz).ceil().max(2.0);
@@ -212,25 +251,30 @@ pub fn simulate(spec: &TrackSpec, record: bool) -> anyhow::Result<TrackRun> {
     let (mut sum2, mut max_e, mut max_du) = (0.0f64, 0.0f64, 0.0f64);
     let (mut clamped, mut slewed) = (0usize, 0usize);
     let (mut u_lo, mut u_hi) = (f64::MAX, f64::MIN);
-    let mut u_prev = sim.lag_state.output_v() as f64;
+    let mut u_prev = lp.state.command_v() as f64;
     let mut trace = Vec::new();
     for k in 0..warm + n {
-        let r_now = gen_.now(&gs) as f64;
-        let r_ahead = gen_.next(&mut gs);
-        let v = pf.step(&mut ps, r_ahead);
-        let s = sim.step(v as f64);
-        let u = sim.lag_state.output_v() as f64;
+        let s = lp.step();
+        if !s.sample.faults.is_empty() {
+            bail!(
+                "the controller latched a fault ({:?}) at {:.4} s: the loop does not run on this stage",
+                s.sample.faults,
+                k as f64 * t
+            );
+        }
+        let u = s.sample.command_v as f64;
         if k >= warm {
-            let e = r_now - s.output_v;
+            let (r, y) = (s.sample.reference_v as f64, s.output_v as f64);
+            let e = r - y;
             sum2 += e * e;
             max_e = max_e.max(e.abs());
             max_du = max_du.max((u - u_prev).abs());
             u_lo = u_lo.min(u);
             u_hi = u_hi.max(u);
-            clamped += s.flags.contains(Flags::CLAMPED) as usize;
-            slewed += s.flags.contains(Flags::SLEW_LIMITED) as usize;
+            clamped += s.sample.flags.contains(Flags::CLAMPED) as usize;
+            slewed += s.sample.flags.contains(Flags::SLEW_LIMITED) as usize;
             if record {
-                trace.push((k as f64 * t, r_now, s.output_v, s.command_v));
+                trace.push((k as f64 * t, r, y, s.sample.dac.volts() as f64));
             }
         }
         u_prev = u;
@@ -245,7 +289,7 @@ pub fn simulate(spec: &TrackSpec, record: bool) -> anyhow::Result<TrackRun> {
         },
         slew_limited_fraction: slewed as f64 / nf,
         command_range_v: (u_lo, u_hi),
-        preview_samples: pf.preview_samples(),
+        preview_samples: controller.prefilter.preview_samples(),
         trace,
     })
 }
