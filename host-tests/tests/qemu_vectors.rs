@@ -23,7 +23,7 @@ fn checked_in_vectors_are_current() {
 #[test]
 fn the_lag_vector_stays_inside_the_window_and_moves() {
     let e = v::lag_errors();
-    let u = v::lag_reference(params::SCENARIO_STEP_V, &e);
+    let u = v::lag_reference(model_core::scenarios::STEP_V, &e);
     let lo = u.iter().cloned().fold(f64::MAX, f64::min);
     let hi = u.iter().cloned().fold(f64::MIN, f64::max);
     println!("lag vector: command spans {lo:.4} .. {hi:.4} V");

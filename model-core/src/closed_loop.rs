@@ -33,7 +33,6 @@
 use crate::codes::{AdcCode, DacCode};
 use crate::controller::{Controller, ControllerState, Mode, Sample};
 use crate::limits::ConfigError;
-use crate::params;
 use crate::plant::{LinearPlant, LinearPlantConfig, PlantState};
 use crate::stage::{Stage, StageConfig, StageState};
 
@@ -354,12 +353,6 @@ impl<P: LoopPlant> ClosedLoop<P> {
         self.state.set_reference(reference_v);
         self.state.set_mode(Mode::ClosedLoop);
     }
-}
-
-/// The scenarios' sensor noise: uniform, +-[`params::SENSOR_NOISE_V`], seeded with
-/// [`params::SCENARIO_NOISE_SEED`].
-pub fn scenario_noise() -> UniformNoise {
-    UniformNoise::new(params::SENSOR_NOISE_V as f32, params::SCENARIO_NOISE_SEED)
 }
 
 #[cfg(test)]

@@ -142,53 +142,6 @@ pub const HYST_FORC_STEP_V: f64 = 0.15;
 /// Frequency of the preconditioning sinusoid (sec. 5.3.4).
 pub const HYST_FORC_PRECONDITION_HZ: f64 = 1.0;
 
-// ----- QEMU smoke scenarios (issue #6; `scenarios.rs`). All our assumptions. -----
-/// Simulated time per scenario, seconds (25 000 samples at 50 kHz).
-pub const SCENARIO_DURATION_S: f64 = 0.5;
-/// Set-point of the step and of the fault scenarios, sensor volts (6 um).
-pub const SCENARIO_STEP_V: f64 = 5.0;
-/// When the step (and the triangle) starts, seconds.
-pub const SCENARIO_STEP_AT_S: f64 = 1e-3;
-/// Time after the step from which the peak error is taken, seconds: nine times the 2 %
-/// settling time of the thesis loop (1.14 ms, README).
-pub const SCENARIO_SETTLE_S: f64 = 10e-3;
-/// Largest error after settling and final error of the set-point scenarios, sensor volts:
-/// four times the sensor's +-2.5 mV noise.
-pub const SCENARIO_TRACKING_TOL_V: f64 = 4.0 * SENSOR_NOISE_V;
-/// Frequency of the triangle scenario, Hz.
-pub const SCENARIO_TRIANGLE_HZ: f64 = 100.0;
-/// Offset of the triangle, sensor volts (issue #3's tracking measurements: 6 V p-p around
-/// 4 V).
-pub const SCENARIO_TRIANGLE_OFFSET_V: f64 = 4.0;
-/// Amplitude (peak) of the triangle, sensor volts.
-pub const SCENARIO_TRIANGLE_AMPLITUDE_V: f64 = 3.0;
-/// Tracking error of the triangle by feedback alone, sensor volts. Over a half period (5 ms,
-/// far shorter than the lag's 1/p = 2.5 s) the compensator acts as the integrator
-/// `Kc p / s`, so a ramp of slope `4 A f` leaves the error `4 A f / (Kc p K)`
-/// (1200 V/s / 3144 /s = 0.38 V).
-pub const SCENARIO_TRIANGLE_VELOCITY_ERR_V: f64 =
-    4.0 * SCENARIO_TRIANGLE_AMPLITUDE_V * SCENARIO_TRIANGLE_HZ
-        / (LAG_KC * LAG_POLE_RAD_S * PLANT_GAIN);
-/// Bound on the feedback-only triangle's peak error, in units of
-/// [`SCENARIO_TRIANGLE_VELOCITY_ERR_V`]: room for the corners.
-pub const SCENARIO_TRIANGLE_PEAK_FACTOR: f64 = 1.5;
-/// The pre-filter must cut the triangle's RMS error below the feedback-only velocity error
-/// divided by this (issue #3: a tenfold cut at 100 Hz).
-pub const SCENARIO_PREFILTER_CUT: f64 = 10.0;
-/// Bound on the RMS tracking error on the ch. 6 stage, as a fraction of the triangle's span
-/// (the lead's criterion in host-tests `controller.rs`: within 2 %, feedforward on or off).
-pub const SCENARIO_FULL_STAGE_RMS_FRAC: f64 = 0.02;
-/// When faults are injected, seconds.
-pub const SCENARIO_FAULT_AT_S: f64 = 0.2;
-/// When the reference moves in the stuck-sensor scenario, seconds (50 ms after the sensor
-/// froze, so the stuck detector has long counted its 5 ms of frozen code).
-pub const SCENARIO_MOVE_AT_S: f64 = 0.25;
-/// Where the reference moves in the stuck-sensor scenario, sensor volts.
-pub const SCENARIO_MOVE_TO_V: f64 = 7.0;
-/// The absurd gain offered in the absurd-gain scenario (a thousand times [`LAG_KC_MAX`]).
-pub const SCENARIO_ABSURD_KC: f64 = 1.0e9;
-/// Seed of the scenarios' sensor noise generator.
-pub const SCENARIO_NOISE_SEED: u32 = 0x2545_f491;
 // ----- Pre-filter and reference generators (sec. 4.1.2.4, eq. 4.8-4.13; issue #3). -----
 /// Time constant of the four planning poles `1/(tau s + 1)^4` (our assumption, chosen by the
 /// trade-off measured in `host-tests/tests/prefilter.rs`: see the design note of

@@ -40,7 +40,6 @@
 
 use crate::closed_loop::{
     ClosedLoop, Converted, FullStage, LinearStage, LoopPlant, LoopSample, NoNoise, UniformNoise,
-    scenario_noise,
 };
 use crate::codes::AdcCode;
 use crate::controller::{Controller, ControllerConfig, Faults, ReferenceSource};
@@ -51,21 +50,68 @@ use crate::prefilter::{PreFilterConfig, PreFilterMode};
 use crate::reference::{ReferenceConfig, Shape};
 use crate::sections::Accumulator;
 
-/// Samples per scenario: [`params::SCENARIO_DURATION_S`] at [`params::SAMPLE_RATE_HZ`].
-pub const SAMPLES: u32 = (params::SCENARIO_DURATION_S * params::SAMPLE_RATE_HZ) as u32;
+// ----- The scenarios' numbers: all our assumptions. -----
+/// Simulated time per scenario, seconds (25 000 samples at 50 kHz).
+pub const DURATION_S: f64 = 0.5;
+/// Set-point of the step and of the fault scenarios, sensor volts (6 um).
+pub const STEP_V: f64 = 5.0;
+/// When the step (and the triangle) starts, seconds.
+pub const STEP_AT_S: f64 = 1e-3;
+/// Time after the step from which the peak error is taken, seconds: nine times the 2 %
+/// settling time of the thesis loop (1.14 ms, `piezo loop`).
+pub const SETTLE_S: f64 = 10e-3;
+/// Largest error after settling and final error of the set-point scenarios, sensor volts:
+/// four times the sensor's +-2.5 mV noise.
+pub const TRACKING_TOL_V: f64 = 4.0 * params::SENSOR_NOISE_V;
+/// Frequency of the triangle scenario, Hz.
+pub const TRIANGLE_HZ: f64 = 100.0;
+/// Offset of the triangle, sensor volts (issue #3's tracking measurements: 6 V p-p around
+/// 4 V).
+pub const TRIANGLE_OFFSET_V: f64 = 4.0;
+/// Amplitude (peak) of the triangle, sensor volts.
+pub const TRIANGLE_AMPLITUDE_V: f64 = 3.0;
+/// Tracking error of the triangle by feedback alone, sensor volts. Over a half period (5 ms,
+/// far shorter than the lag's 1/p = 2.5 s) the compensator acts as the integrator
+/// `Kc p / s`, so a ramp of slope `4 A f` leaves the error `4 A f / (Kc p K)`
+/// (1200 V/s / 3144 /s = 0.38 V).
+pub const TRIANGLE_VELOCITY_ERR_V: f64 = 4.0 * TRIANGLE_AMPLITUDE_V * TRIANGLE_HZ
+    / (params::LAG_KC * params::LAG_POLE_RAD_S * params::PLANT_GAIN);
+/// Bound on the feedback-only triangle's peak error, in units of
+/// [`TRIANGLE_VELOCITY_ERR_V`]: room for the corners.
+pub const TRIANGLE_PEAK_FACTOR: f64 = 1.5;
+/// The pre-filter must cut the triangle's RMS error below the feedback-only velocity error
+/// divided by this (issue #3: a tenfold cut at 100 Hz).
+pub const PREFILTER_CUT: f64 = 10.0;
+/// Bound on the RMS tracking error on the ch. 6 stage, as a fraction of the triangle's span
+/// (the lead's criterion in host-tests `controller.rs`: within 2 %, feedforward on or off).
+pub const FULL_STAGE_RMS_FRAC: f64 = 0.02;
+/// When faults are injected, seconds.
+pub const FAULT_AT_S: f64 = 0.2;
+/// When the reference moves in the stuck-sensor scenario, seconds (50 ms after the sensor
+/// froze, so the stuck detector has long counted its 5 ms of frozen code).
+pub const MOVE_AT_S: f64 = 0.25;
+/// Where the reference moves in the stuck-sensor scenario, sensor volts.
+pub const MOVE_TO_V: f64 = 7.0;
+/// The absurd gain offered in the absurd-gain scenario (a thousand times [`LAG_KC_MAX`]).
+pub const ABSURD_KC: f64 = 1.0e9;
+/// Seed of the scenarios' sensor noise generator.
+pub const NOISE_SEED: u32 = 0x2545_f491;
+
+/// Samples per scenario: [`DURATION_S`] at [`params::SAMPLE_RATE_HZ`].
+pub const SAMPLES: u32 = (DURATION_S * params::SAMPLE_RATE_HZ) as u32;
 
 const fn sample_at(t_s: f64) -> u32 {
     (t_s * params::SAMPLE_RATE_HZ) as u32
 }
 
 /// Sample at which the step (and the triangle) starts.
-pub const STEP_AT: u32 = sample_at(params::SCENARIO_STEP_AT_S);
+pub const STEP_AT: u32 = sample_at(STEP_AT_S);
 /// Sample from which the peak error is taken (the transient of the step is over).
-pub const SETTLED_AT: u32 = sample_at(params::SCENARIO_STEP_AT_S + params::SCENARIO_SETTLE_S);
+pub const SETTLED_AT: u32 = sample_at(STEP_AT_S + SETTLE_S);
 /// Sample at which faults are injected.
-pub const FAULT_AT: u32 = sample_at(params::SCENARIO_FAULT_AT_S);
+pub const FAULT_AT: u32 = sample_at(FAULT_AT_S);
 /// Sample at which the reference moves again in the stuck-sensor scenario.
-pub const MOVE_AT: u32 = sample_at(params::SCENARIO_MOVE_AT_S);
+pub const MOVE_AT: u32 = sample_at(MOVE_AT_S);
 
 /// The scenarios, in the order the QEMU image runs them.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -73,8 +119,8 @@ pub enum Scenario {
     /// Closed loop, external reference 0 V then 5 V (sensor volts) from [`STEP_AT`], through
     /// the default (full) pre-filter.
     Step,
-    /// Closed loop, a 100 Hz triangle of [`params::SCENARIO_TRIANGLE_AMPLITUDE_V`] around
-    /// [`params::SCENARIO_TRIANGLE_OFFSET_V`] from the controller's on-board reference
+    /// Closed loop, a 100 Hz triangle of [`TRIANGLE_AMPLITUDE_V`] around
+    /// [`TRIANGLE_OFFSET_V`] from the controller's on-board reference
     /// generator, with preview, through the full pre-filter.
     Triangle,
     /// The same triangle with the pre-filter off: feedback alone.
@@ -88,7 +134,7 @@ pub enum Scenario {
     /// 5 V set-point; from [`FAULT_AT`] the sensor reads the ADC's top code.
     SensorSaturates,
     /// 5 V set-point; from [`FAULT_AT`] the ADC code freezes; at [`MOVE_AT`] the reference
-    /// moves to [`params::SCENARIO_MOVE_TO_V`], so the command moves and the sensor does not.
+    /// moves to [`MOVE_TO_V`], so the command moves and the sensor does not.
     SensorSticks,
     /// 5 V set-point; from [`FAULT_AT`] the reference is NaN.
     NanReference,
@@ -134,14 +180,14 @@ impl Scenario {
     /// The external reference at sample `n`, sensor volts. The triangles' references come
     /// from the controller's generator; here they are its offset (unused).
     pub fn reference_v(self, n: u32) -> f32 {
-        let hold = params::SCENARIO_STEP_V as f32;
+        let hold = STEP_V as f32;
         match self {
             Self::Step | Self::AbsurdGain | Self::SensorSaturates => step_reference(n),
             Self::Triangle
             | Self::TriangleFeedbackOnly
             | Self::HysteresisFeedforward
-            | Self::HysteresisFeedbackOnly => params::SCENARIO_TRIANGLE_OFFSET_V as f32,
-            Self::SensorSticks if n >= MOVE_AT => params::SCENARIO_MOVE_TO_V as f32,
+            | Self::HysteresisFeedbackOnly => TRIANGLE_OFFSET_V as f32,
+            Self::SensorSticks if n >= MOVE_AT => MOVE_TO_V as f32,
             Self::SensorSticks => step_reference(n),
             Self::NanReference if n >= FAULT_AT => f32::NAN,
             Self::NanReference => hold,
@@ -154,9 +200,9 @@ impl Scenario {
         let base = ControllerConfig::default();
         let triangle = ReferenceConfig {
             shape: Shape::Triangle,
-            offset_v: params::SCENARIO_TRIANGLE_OFFSET_V,
-            amplitude_v: params::SCENARIO_TRIANGLE_AMPLITUDE_V,
-            freq_hz: params::SCENARIO_TRIANGLE_HZ,
+            offset_v: TRIANGLE_OFFSET_V,
+            amplitude_v: TRIANGLE_AMPLITUDE_V,
+            freq_hz: TRIANGLE_HZ,
             ..base.reference
         };
         match self {
@@ -209,11 +255,7 @@ impl Scenario {
 }
 
 fn step_reference(n: u32) -> f32 {
-    if n >= STEP_AT {
-        params::SCENARIO_STEP_V as f32
-    } else {
-        0.0
-    }
+    if n >= STEP_AT { STEP_V as f32 } else { 0.0 }
 }
 
 /// Start value of [`fnv1a`].
@@ -320,22 +362,22 @@ impl Figures {
                 if self.faults != 0 {
                     return Err("a fault latched in a fault-free scenario");
                 }
-                let tol = params::SCENARIO_TRACKING_TOL_V as f32;
-                let final_err = (self.final_output_v - params::SCENARIO_STEP_V as f32).abs();
-                let velocity_err = params::SCENARIO_TRIANGLE_VELOCITY_ERR_V as f32;
-                let span = 2.0 * params::SCENARIO_TRIANGLE_AMPLITUDE_V as f32;
+                let tol = TRACKING_TOL_V as f32;
+                let final_err = (self.final_output_v - STEP_V as f32).abs();
+                let velocity_err = TRIANGLE_VELOCITY_ERR_V as f32;
+                let span = 2.0 * TRIANGLE_AMPLITUDE_V as f32;
                 if scenario.on_full_stage() {
-                    let bound = params::SCENARIO_FULL_STAGE_RMS_FRAC as f32 * span;
+                    let bound = FULL_STAGE_RMS_FRAC as f32 * span;
                     if !within(self.mean_sq_err_v2, bound * bound) {
                         return Err("the ch. 6 stage's RMS tracking error exceeded its bound");
                     }
                 } else if scenario == Scenario::Triangle {
-                    let bound = velocity_err / params::SCENARIO_PREFILTER_CUT as f32;
+                    let bound = velocity_err / PREFILTER_CUT as f32;
                     if !within(self.mean_sq_err_v2, bound * bound) {
                         return Err("the pre-filtered triangle's RMS error exceeded its bound");
                     }
                 } else if scenario == Scenario::TriangleFeedbackOnly {
-                    let bound = params::SCENARIO_TRIANGLE_PEAK_FACTOR as f32 * velocity_err;
+                    let bound = TRIANGLE_PEAK_FACTOR as f32 * velocity_err;
                     if !within(self.peak_err_v, bound) {
                         return Err("the triangle's tracking error exceeded its bound");
                     }
@@ -402,6 +444,12 @@ pub fn scenario_controller(scenario: Scenario) -> Result<Controller, ConfigError
     Controller::new(&scenario.config())
 }
 
+/// The scenarios' sensor noise: uniform, +-[`params::SENSOR_NOISE_V`], seeded with
+/// [`NOISE_SEED`].
+pub fn scenario_noise() -> UniformNoise {
+    UniformNoise::new(params::SENSOR_NOISE_V as f32, NOISE_SEED)
+}
+
 /// The scenario's plant: `stage` behind the converters, with the scenarios' uniform sensor
 /// noise ([`scenario_noise`]) for the linear stage; the ch. 6 stage has its own sensor.
 pub fn linear_plant() -> Result<Converted<LinearStage, UniformNoise>, ConfigError> {
@@ -454,7 +502,7 @@ pub fn run_with<P: LoopPlant>(
     for n in 0..SAMPLES {
         if scenario == Scenario::AbsurdGain && n == FAULT_AT {
             let ok = scenario.config();
-            for kc in [params::SCENARIO_ABSURD_KC, f64::NAN, -params::LAG_KC] {
+            for kc in [ABSURD_KC, f64::NAN, -params::LAG_KC] {
                 let offered = ControllerConfig {
                     lag: LagConfig { kc, ..ok.lag },
                     ..ok
@@ -563,8 +611,8 @@ mod tests {
             lo = lo.min(r);
             hi = hi.max(r);
         }
-        let off = params::SCENARIO_TRIANGLE_OFFSET_V as f32;
-        let amp = params::SCENARIO_TRIANGLE_AMPLITUDE_V as f32;
+        let off = TRIANGLE_OFFSET_V as f32;
+        let amp = TRIANGLE_AMPLITUDE_V as f32;
         println!("triangle spans {lo} .. {hi} V");
         assert!((lo - (off - amp)).abs() < 1e-5 && (hi - (off + amp)).abs() < 1e-5);
     }

@@ -221,7 +221,7 @@ mod tests {
         st.set_reference(5.0);
         let s = c.step(&mut st, AdcCode::MAX);
         defmt::assert!(s.faults.contains(Faults::SENSOR_RANGE));
-        for kc in [params::SCENARIO_ABSURD_KC, f64::NAN, -1.0, 0.0] {
+        for kc in [model_core::scenarios::ABSURD_KC, f64::NAN, -1.0, 0.0] {
             let lag = LagConfig {
                 kc,
                 ..LagConfig::default()

@@ -266,7 +266,7 @@ pub fn generate() -> String {
     s += "//! stale. Values are IEEE `f32` bits.\n";
     s += "#![allow(dead_code)]\n\n";
 
-    let u0 = params::SCENARIO_STEP_V;
+    let u0 = model_core::scenarios::STEP_V;
     let errors = lag_errors();
     let reference = lag_reference(u0, &errors);
     let _ = writeln!(

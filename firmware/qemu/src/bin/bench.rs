@@ -21,6 +21,7 @@
 #[cfg(target_os = "none")]
 mod image {
     use core::hint::black_box;
+    use model_core::closed_loop::{LinearStage, StageModel};
     use model_core::codes::{AdcCode, DacCode};
     use model_core::controller::{Controller, ControllerState, Mode, Sample};
     use model_core::controller::{ControllerConfig, ReferenceSource};
@@ -28,14 +29,12 @@ mod image {
     use model_core::lag::LagConfig;
     use model_core::lag::{LagCompensator, LagState};
     use model_core::limits::{Flags, OutputLimits};
-    use model_core::params;
     use model_core::plant::LinearPlantConfig;
     use model_core::plant::{LinearPlant, PlantState};
     use model_core::prefilter::PreFilterMode;
     use model_core::prefilter::{PreFilter, PreFilterConfig, PreFilterState};
     use model_core::reference::{ReferenceConfig, ReferenceGenerator, ReferenceState, Shape};
-    use model_core::closed_loop::{LinearStage, StageModel};
-    use model_core::scenarios::{Scenario, scenario_controller};
+    use model_core::scenarios::{self, Scenario, scenario_controller};
     use model_core::stage::{Stage, StageConfig, StageState};
     use piezo_qemu::{EXIT_FAIL, EXIT_PASS, InstructionCounter, StackProbe, cpu_part, exit};
 
@@ -227,7 +226,7 @@ mod image {
             };
             let mut s = ControllerState::new(&c);
             s.set_mode(Mode::ClosedLoop);
-            s.set_reference(params::SCENARIO_TRIANGLE_OFFSET_V as f32);
+            s.set_reference(scenarios::TRIANGLE_OFFSET_V as f32);
             for i in 0..N {
                 controller_step(&c, &mut s, rec.adc[i]);
             }
@@ -304,9 +303,9 @@ mod image {
             let Ok(g) = ReferenceGenerator::new(
                 &ReferenceConfig {
                     shape,
-                    offset_v: params::SCENARIO_TRIANGLE_OFFSET_V,
-                    amplitude_v: params::SCENARIO_TRIANGLE_AMPLITUDE_V,
-                    freq_hz: params::SCENARIO_TRIANGLE_HZ,
+                    offset_v: scenarios::TRIANGLE_OFFSET_V,
+                    amplitude_v: scenarios::TRIANGLE_AMPLITUDE_V,
+                    freq_hz: scenarios::TRIANGLE_HZ,
                     ..ReferenceConfig::default()
                 },
                 pf.preview_samples(),
