@@ -11,17 +11,18 @@
 //! Nyquist rate, and at the 3000 rad/s crossover Tustin's frequency warp is 0.1 %. ZOH would
 //! add a sample of delay (3.5 deg of phase at crossover).
 //!
-//! # Realisation: parallel form, delta updates, compensated sums
+//! # Realisation: parallel form, two delta-form sections, compensated sums
 //! Partial fractions split the compensator into an integrator and a first-order lag:
 //!
 //! ```text
 //! G_c(s) = Kc z / s  +  Kc (p - z) / (s + p)
 //! ```
 //!
-//! Each is discretised by Tustin on its own, with `e_s = e[n] + e[n-1]`:
+//! Each is one [`FirstOrder`] section of [`crate::sections`] (Tustin, delta form), both fed
+//! the error, with `e_s = e[n] + e[n-1]`:
 //!
 //! ```text
-//! v[n] = v[n-1] + (Kc z T / 2) e_s
+//! v[n] = v[n-1] + (Kc z T / 2) e_s                                       (alpha = 0, bd = 0)
 //! w[n] = w[n-1] + b e_s - alpha w[n-1],  alpha = p T / (1 + p T/2),  b = Kc (p - z) (T/2) / (1 + p T/2)
 //! u[n] = v[n] + w[n]
 //! ```
@@ -29,10 +30,14 @@
 //! `alpha` is `1 - a` computed without cancellation (no `exp` is needed: Tustin is rational),
 //! so the lag pole `a = 1 - 7.96e-6` is exact to `f32` relative precision, where a direct form
 //! would round `a` itself to the nearest `f32` (spacing 6e-8, a 0.75 % error on `1 - a`) and
-//! misplace the lag pole and zero. The states `v` and `w` are
+//! misplace the lag pole and zero. The sections' outputs `v` and `w` are kept in
 //! [`Accumulator`]s so the per-step increments (often 1e-6 of the state) are not lost to
-//! rounding; see [`crate::sections`]. The test in host-tests compares this against an
-//! independent `f64` direct-form reference for 1e6 steps: DAC codes agree within 1 LSB.
+//! rounding. Why not one second-order section: its two poles (z = 1 and 1 - 8e-6) and its zero
+//! would all sit near 1, and the anti-windup below needs the integrator's and the lag's
+//! shares of the command apart. The parallel form costs one duplicated input history and the
+//! integrator's two zero-weight terms (a few instructions). The test in host-tests compares
+//! this against an independent `f64` direct-form reference for 1e6 steps: DAC codes agree
+//! within 1 LSB.
 //!
 //! # Limits and anti-windup
 //! The command passes through [`OutputLimits::apply`] (NaN guard, slew limit, window). When
@@ -60,7 +65,7 @@
 
 use crate::limits::{ConfigError, Flags, OutputLimits, check_period};
 use crate::params;
-use crate::sections::Accumulator;
+use crate::sections::{Accumulator, FirstOrder, FirstOrderState};
 
 /// The continuous parameters, the sample period and the limits. Built into a
 /// [`LagCompensator`] by [`LagCompensator::new`].
@@ -101,12 +106,11 @@ impl Default for LagConfig {
 /// built outside the interrupt and swapped in whole.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct LagCompensator {
-    /// `Kc z T / 2`.
-    pub int_gain: f32,
-    /// `Kc (p - z) (T/2) / (1 + p T/2)`.
-    pub lag_gain: f32,
-    /// `1 - a = p T / (1 + p T/2)`.
-    pub lag_alpha: f32,
+    /// `Kc z / s` after Tustin: `bs = Kc z T / 2`, `bd = alpha = 0`.
+    pub integrator: FirstOrder,
+    /// `Kc (p - z) / (s + p)` after Tustin: `bs = Kc (p - z) (T/2) / (1 + p T/2)`,
+    /// `alpha = 1 - a = p T / (1 + p T/2)`, `bd = 0`.
+    pub lag: FirstOrder,
     /// The last stage.
     pub limits: OutputLimits,
 }
@@ -132,12 +136,13 @@ impl LagCompensator {
             return Err(ConfigError::BadGain);
         }
         let limits = OutputLimits::new(c.min_v, c.max_v, c.slew_v_per_s, t)?;
-        let half = 0.5 * t;
-        let den = 1.0 + c.pole_rad_s * half;
         Ok(Self {
-            int_gain: (c.kc * c.zero_rad_s * half) as f32,
-            lag_gain: (c.kc * (c.pole_rad_s - c.zero_rad_s) * half / den) as f32,
-            lag_alpha: (c.pole_rad_s * t / den) as f32,
+            integrator: FirstOrder::tustin([0.0, c.kc * c.zero_rad_s], [1.0, 0.0], t),
+            lag: FirstOrder::tustin(
+                [0.0, c.kc * (c.pole_rad_s - c.zero_rad_s)],
+                [1.0, c.pole_rad_s],
+                t,
+            ),
             limits,
         })
     }
@@ -179,13 +184,10 @@ impl LagCompensator {
         } else {
             (0.0, Flags::NONFINITE)
         };
-        let e_sum = error_v + state.e_prev;
-        state.e_prev = error_v;
-        let lag_before = state.lag;
-        state.integ.add(self.int_gain * e_sum);
-        let w = state.lag.value();
-        state.lag.add(self.lag_gain * e_sum - self.lag_alpha * w);
-        let raw = state.integ.value() + state.lag.value() + ff;
+        let lag_before = state.lag.y;
+        let v = self.integrator.step(&mut state.integ, error_v);
+        let w = self.lag.step(&mut state.lag, error_v);
+        let raw = v + w + ff;
         let (out, flags) = self.limits.apply(state.last_v, raw);
         if flags.contains(Flags::NONFINITE) {
             // The states overflowed: restart them from the last safe command.
@@ -193,22 +195,23 @@ impl LagCompensator {
         } else if out != raw {
             // Anti-windup: the lag state keeps its value from before this step and the
             // integrator takes up the rest, so the states describe the command really sent.
-            state.lag = lag_before;
+            state.lag.y = lag_before;
             state
                 .integ
-                .add(out - (state.integ.value() + state.lag.value() + ff));
+                .y
+                .add(out - (state.integ.y.value() + state.lag.y.value() + ff));
         }
         state.last_v = out;
         (out, flags | ff_flags)
     }
 }
 
-/// The compensator's history: the state half.
+/// The compensator's history: the state half. Both sections' outputs are compensated sums;
+/// both keep the last error as their input history.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct LagState {
-    integ: Accumulator,
-    lag: Accumulator,
-    e_prev: f32,
+    integ: FirstOrderState<Accumulator>,
+    lag: FirstOrderState<Accumulator>,
     last_v: f32,
     held: bool,
 }
@@ -217,9 +220,8 @@ impl LagState {
     /// A state whose command is `output_v` with no error history.
     pub fn new(output_v: f32) -> Self {
         let mut s = Self {
-            integ: Accumulator::default(),
-            lag: Accumulator::default(),
-            e_prev: 0.0,
+            integ: FirstOrderState::default(),
+            lag: FirstOrderState::default(),
             last_v: 0.0,
             held: false,
         };
@@ -227,10 +229,13 @@ impl LagState {
         s
     }
 
+    /// The integrator holds `output_v`, the lag is empty, no error history.
     fn reload(&mut self, output_v: f32) {
-        self.integ.set(output_v);
-        self.lag.set(0.0);
-        self.e_prev = 0.0;
+        self.integ = FirstOrderState {
+            x: 0.0,
+            y: Accumulator::new(output_v),
+        };
+        self.lag = FirstOrderState::default();
     }
 
     /// Bumpless reset: the next command continues from `output_v` (a non-finite value is
@@ -271,7 +276,7 @@ impl LagState {
 
     /// The integrator's part of the command, volts.
     pub fn integrator_v(&self) -> f32 {
-        self.integ.value()
+        self.integ.y.value()
     }
 }
 
