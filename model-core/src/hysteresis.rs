@@ -176,20 +176,14 @@ impl HysteresisTable {
         if everett_v.len() != TABLE_LEN {
             return Err(ConfigError::BadTable);
         }
-        let mut table = Self {
-            u_min_v,
-            u_max_v,
-            step_v: (u_max_v - u_min_v) / (GRID_NODES - 1) as f32,
-            inv_step_per_v: (GRID_NODES - 1) as f32 / (u_max_v - u_min_v),
-            offset_v,
-            everett_v: [0.0; TABLE_LEN],
-        };
-        for (dst, src) in table.everett_v.iter_mut().zip(everett_v) {
+        let mut grid = [0.0; TABLE_LEN];
+        for (dst, src) in grid.iter_mut().zip(everett_v) {
             if !src.is_finite() {
                 return Err(ConfigError::NotFinite);
             }
             *dst = *src;
         }
+        let table = Self::from_checked_grid(u_min_v, u_max_v, offset_v, grid);
         // Monotone: E(i, j) >= E(i - 1, j) (rising in alpha; E(j, j) = 0) and
         // E(i, j) >= E(i, j + 1) (falling in beta; E(i, i) = 0).
         for i in 1..GRID_NODES {
@@ -240,6 +234,36 @@ impl HysteresisTable {
         if range <= 0.0 {
             return Err(ConfigError::BadWindow);
         }
+        let e = Self::quadratic_grid(u_min_v, u_max_v, dc_gain, loop_width_frac);
+        Self::from_grid(u_min_v as f32, u_max_v as f32, offset_v as f32, &e)
+    }
+
+    /// The table without checks: for grids [`Self::from_grid`] has checked or the thesis
+    /// default, whose constants a unit test checks.
+    fn from_checked_grid(
+        u_min_v: f32,
+        u_max_v: f32,
+        offset_v: f32,
+        everett_v: [f32; TABLE_LEN],
+    ) -> Self {
+        Self {
+            u_min_v,
+            u_max_v,
+            step_v: (u_max_v - u_min_v) / (GRID_NODES - 1) as f32,
+            inv_step_per_v: (GRID_NODES - 1) as f32 / (u_max_v - u_min_v),
+            offset_v,
+            everett_v,
+        }
+    }
+
+    /// The Everett grid of [`Self::quadratic_everett`] (`u_min_v < u_max_v`).
+    fn quadratic_grid(
+        u_min_v: f64,
+        u_max_v: f64,
+        dc_gain: f64,
+        loop_width_frac: f64,
+    ) -> [f32; TABLE_LEN] {
+        let range = u_max_v - u_min_v;
         let span = dc_gain * range;
         let k2 = 2.0 * loop_width_frac * span / (range * range);
         let k1 = (span - k2 * range * range) / range;
@@ -253,7 +277,7 @@ impl HysteresisTable {
                 }
             }
         }
-        Self::from_grid(u_min_v as f32, u_max_v as f32, offset_v as f32, &e)
+        e
     }
 
     /// The default table of the thesis stage, from our documented assumption (`params`,
@@ -270,38 +294,25 @@ impl HysteresisTable {
     /// assert!(down - up > 1.0); // the loop is about 1.46 V wide at mid-range
     /// ```
     pub fn thesis_default() -> Self {
-        match Self::quadratic_everett(
+        // The constants pass `quadratic_everett`'s checks (unit test
+        // `thesis_default_is_the_checked_quadratic_table`), so the grid is built unchecked
+        // and this cannot fail.
+        let (lo, hi) = (
             params::HYST_DEFAULT_INPUT_MIN_V,
             params::HYST_DEFAULT_INPUT_MAX_V,
-            params::HYST_DEFAULT_OFFSET_V,
+        );
+        let e = Self::quadratic_grid(
+            lo,
+            hi,
             params::HYST_DEFAULT_DC_GAIN,
             params::HYST_DEFAULT_LOOP_WIDTH_FRAC,
-        ) {
-            Ok(t) => t,
-            // The constants are valid (checked by a unit test); a linear table if not.
-            Err(_) => Self::linear_fallback(),
-        }
-    }
-
-    fn linear_fallback() -> Self {
-        let span_v = (params::HYST_DEFAULT_INPUT_MAX_V - params::HYST_DEFAULT_INPUT_MIN_V) as f32;
-        let step = span_v / (GRID_NODES - 1) as f32;
-        let mut e = [0.0f32; TABLE_LEN];
-        for i in 1..GRID_NODES {
-            for j in 0..i {
-                if let Some(slot) = packed_index(i, j).and_then(|k| e.get_mut(k)) {
-                    *slot = params::HYST_DEFAULT_DC_GAIN as f32 * step * (i - j) as f32;
-                }
-            }
-        }
-        Self {
-            u_min_v: 0.0,
-            u_max_v: 10.0,
-            step_v: step,
-            inv_step_per_v: 1.0 / step,
-            offset_v: 0.0,
-            everett_v: e,
-        }
+        );
+        Self::from_checked_grid(
+            lo as f32,
+            hi as f32,
+            params::HYST_DEFAULT_OFFSET_V as f32,
+            e,
+        )
     }
 
     /// Input range `(u_min, u_max)`, volts at the amplifier input.
@@ -976,6 +987,18 @@ mod tests {
         );
         let bytes = core::mem::size_of::<HysteresisTable>();
         assert!(bytes <= 4096, "{bytes}");
+    }
+
+    #[test]
+    fn thesis_default_is_the_checked_quadratic_table() {
+        let checked = HysteresisTable::quadratic_everett(
+            params::HYST_DEFAULT_INPUT_MIN_V,
+            params::HYST_DEFAULT_INPUT_MAX_V,
+            params::HYST_DEFAULT_OFFSET_V,
+            params::HYST_DEFAULT_DC_GAIN,
+            params::HYST_DEFAULT_LOOP_WIDTH_FRAC,
+        );
+        assert_eq!(checked, Ok(HysteresisTable::thesis_default()));
     }
 
     #[test]

@@ -49,10 +49,10 @@
 //! always describe the sent command and the output leaves the limit as soon as the error
 //! changes sign.
 //!
-//! # Hold and reset
-//! [`LagState::hold`] freezes the states and the command; releasing continues from the same
-//! command (bumpless). [`LagState::reset_to`] loads the states so that the next command equals
-//! a given value with zero error (bumpless hand-over from open loop or from the safe value).
+//! # Reset
+//! [`LagState::reset_to`] loads the states so that the next command equals a given value with
+//! zero error (bumpless hand-over from open loop, from hold or from the safe value; holding the
+//! command is the controller's business, [`crate::controller`]).
 //!
 //! # Example
 //! ```
@@ -173,9 +173,6 @@ impl LagCompensator {
         error_v: f32,
         feedforward_v: f32,
     ) -> (f32, Flags) {
-        if state.held {
-            return (state.last_v, Flags::HELD);
-        }
         if !error_v.is_finite() {
             return (state.last_v, Flags::NONFINITE);
         }
@@ -213,7 +210,6 @@ pub struct LagState {
     integ: FirstOrderState<Accumulator>,
     lag: FirstOrderState<Accumulator>,
     last_v: f32,
-    held: bool,
 }
 
 impl LagState {
@@ -223,7 +219,6 @@ impl LagState {
             integ: FirstOrderState::default(),
             lag: FirstOrderState::default(),
             last_v: 0.0,
-            held: false,
         };
         s.reset_to(output_v);
         s
@@ -257,16 +252,6 @@ impl LagState {
         if feedforward_v.is_finite() {
             self.reload(self.last_v - feedforward_v);
         }
-    }
-
-    /// Freeze (`true`) or release (`false`) the compensator; the command stays where it is.
-    pub fn hold(&mut self, on: bool) {
-        self.held = on;
-    }
-
-    /// True while held.
-    pub fn is_held(&self) -> bool {
-        self.held
     }
 
     /// The last command, volts.
@@ -315,14 +300,11 @@ mod tests {
     }
 
     #[test]
-    fn hold_and_nan_keep_the_command() {
+    fn nan_keeps_the_command() {
         let lag = LagCompensator::new(&LagConfig::default()).unwrap();
         let mut s = LagState::new(3.0);
         let u = lag.update(&mut s, 0.01);
         assert_eq!(lag.update_flags(&mut s, f32::NAN), (u, Flags::NONFINITE));
-        s.hold(true);
-        assert_eq!(lag.update(&mut s, 1.0), u);
-        s.hold(false);
         assert!(lag.update(&mut s, 0.0) > u);
     }
 }

@@ -207,13 +207,6 @@ impl OutputLimits {
         (out, flags)
     }
 
-    /// One step of a ramp from `last` towards `target` at the slew limit, inside the window:
-    /// the safe ramp used on faults.
-    #[inline]
-    pub fn ramp_towards(&self, last: f32, target: f32) -> f32 {
-        self.apply(last, target).0
-    }
-
     /// True if `v` is inside the window.
     #[inline]
     pub fn contains(&self, v: f32) -> bool {

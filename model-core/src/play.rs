@@ -13,13 +13,14 @@
 //!
 //! **Why this form and not the Everett table** ([`crate::hysteresis`]): the model-gap loop fits
 //! the hysteresis from arbitrary records in one linear least-squares solve (the output is
-//! linear in the weights), with four parameters whose meaning is plain, and the state is four
-//! `f32` (so [`crate::stage::StageState`] stays `Copy`). The table is the model for
+//! linear in the weights), with one weight per operator whose meaning is plain (eight,
+//! [`PLAY_OPERATORS`], over the fixed radii [`crate::params::PLAY_RADII_V`]), and the state is
+//! eight `f32` (so [`crate::stage::StageState`] stays `Copy`). The table is the model for
 //! identification from reversal curves and for inversion; a fitted play sum converts to it
 //! exactly (its Everett function is `sum_i w_i max(a - b - 2 r_i, 0)`), which the lead may
 //! choose to do when the stage takes a table.
 //!
-//! Cost: four clamps per step; no allocation, no panics.
+//! Cost: one clamp and one multiply-add per operator (eight) per step; no allocation, no panics.
 
 use crate::limits::ConfigError;
 use crate::params::PLAY_OPERATORS;
