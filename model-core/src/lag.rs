@@ -63,9 +63,10 @@
 //! assert!(u > 2.0 && u < 2.001);
 //! ```
 
-use crate::limits::{ConfigError, Flags, OutputLimits, check_period};
+use crate::limits::{ConfigError, Flags, OutputLimits, check_finite, check_period, check_range};
 use crate::params;
 use crate::sections::{Accumulator, FirstOrder, FirstOrderState};
+use core::ops::Bound::{Excluded, Included};
 
 /// The continuous parameters, the sample period and the limits. Built into a
 /// [`LagCompensator`] by [`LagCompensator::new`].
@@ -118,23 +119,17 @@ pub struct LagCompensator {
 impl LagCompensator {
     /// Discretise `config`. Refuses non-finite values, rates outside 10..200 kHz, `Kc` outside
     /// `(0, 1e6]`, a zero or pole that is not positive or above 1/100 of the sample rate
-    /// (rad/s), and bad limits.
+    /// (rad/s), and bad limits; the error names the field of [`LagConfig`].
     pub fn new(config: &LagConfig) -> Result<Self, ConfigError> {
         let c = config;
-        if !(c.kc.is_finite() && c.zero_rad_s.is_finite() && c.pole_rad_s.is_finite()) {
-            return Err(ConfigError::NotFinite);
-        }
+        check_finite("kc", c.kc)?;
+        check_finite("zero_rad_s", c.zero_rad_s)?;
+        check_finite("pole_rad_s", c.pole_rad_s)?;
         let t = check_period(c.period_s)?;
-        let corner_max = 0.01 / t;
-        if !(c.kc > 0.0
-            && c.kc <= params::LAG_KC_MAX
-            && c.zero_rad_s > 0.0
-            && c.zero_rad_s <= corner_max
-            && c.pole_rad_s > 0.0
-            && c.pole_rad_s <= corner_max)
-        {
-            return Err(ConfigError::BadGain);
-        }
+        let corner = (Excluded(0.0), Included(0.01 / t));
+        check_range("kc", c.kc, Excluded(0.0), Included(params::LAG_KC_MAX))?;
+        check_range("zero_rad_s", c.zero_rad_s, corner.0, corner.1)?;
+        check_range("pole_rad_s", c.pole_rad_s, corner.0, corner.1)?;
         let limits = OutputLimits::new(c.min_v, c.max_v, c.slew_v_per_s, t)?;
         Ok(Self {
             integrator: FirstOrder::tustin([0.0, c.kc * c.zero_rad_s], [1.0, 0.0], t),

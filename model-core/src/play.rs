@@ -22,7 +22,7 @@
 //!
 //! Cost: one clamp and one multiply-add per operator (eight) per step; no allocation, no panics.
 
-use crate::limits::ConfigError;
+use crate::limits::{ConfigError, check_within};
 use crate::params::PLAY_OPERATORS;
 
 /// Parameters of the play-operator hysteresis (design time, `f64`).
@@ -37,18 +37,11 @@ pub struct PlayConfig {
 impl PlayConfig {
     /// Finite, thresholds within 0..10 V, weights within -1..1.
     pub fn validate(&self) -> Result<(), ConfigError> {
-        if self
-            .radii_v
-            .iter()
-            .chain(&self.weights)
-            .any(|v| !v.is_finite())
-        {
-            return Err(ConfigError::NotFinite);
+        for r in self.radii_v {
+            check_within("radii_v", r, 0.0, 10.0)?;
         }
-        if self.radii_v.iter().any(|r| !(0.0..=10.0).contains(r))
-            || self.weights.iter().any(|w| w.abs() > 1.0)
-        {
-            return Err(ConfigError::BadGain);
+        for w in self.weights {
+            check_within("weights", w, -1.0, 1.0)?;
         }
         Ok(())
     }

@@ -175,11 +175,12 @@
 //! ```
 
 use crate::lag::{LagCompensator, LagConfig};
-use crate::limits::{ConfigError, check_period};
+use crate::limits::{ConfigError, Reason, check_period, check_within};
 use crate::params;
 use crate::plant::{LinearPlant, LinearPlantConfig};
 use crate::sections::{Accumulator, FirstOrder, FirstOrderState, SecondOrder, SecondOrderState};
 use core::f64::consts::PI;
+use core::ops::Bound::{Excluded, Included};
 
 /// Length of the direct branch's delay line, samples.
 const LINE: usize = 64;
@@ -263,8 +264,9 @@ pub struct PreFilterState {
 impl PreFilter {
     /// Derive the pre-filter of the loop made of `lag` and `plant` (which must share their
     /// sample period). Refuses what [`LagCompensator::new`] or [`LinearPlant::new`] refuse,
-    /// different periods ([`ConfigError::BadRate`]), a non-finite tau, and tau outside
-    /// `params::PREFILTER_TAU_MIN_S..=PREFILTER_TAU_MAX_S` ([`ConfigError::BadTimeConstant`]).
+    /// different periods (`"plant.period_s"`, [`Reason::Mismatch`]), a non-finite tau, and tau
+    /// outside `params::PREFILTER_TAU_MIN_S..=PREFILTER_TAU_MAX_S` or too long for the
+    /// preview (`"tau_s"`, [`Reason::OutOfRange`]).
     ///
     /// ```
     /// use model_core::lag::LagConfig;
@@ -285,15 +287,17 @@ impl PreFilter {
         LinearPlant::new(plant)?;
         let t = check_period(lag.period_s)?;
         if (plant.period_s - t).abs() > 1e-9 * t {
-            return Err(ConfigError::BadRate);
+            return Err(ConfigError::new(
+                "plant.period_s",
+                Reason::Mismatch("lag.period_s"),
+            ));
         }
-        let tau = config.tau_s;
-        if !tau.is_finite() {
-            return Err(ConfigError::NotFinite);
-        }
-        if !(params::PREFILTER_TAU_MIN_S..=params::PREFILTER_TAU_MAX_S).contains(&tau) {
-            return Err(ConfigError::BadTimeConstant);
-        }
+        let tau = check_within(
+            "tau_s",
+            config.tau_s,
+            params::PREFILTER_TAU_MIN_S,
+            params::PREFILTER_TAU_MAX_S,
+        )?;
         let delay_s = match (config.mode, config.delay) {
             (PreFilterMode::Full, DelayHandling::Preview) => plant.delay_s,
             (PreFilterMode::Full, DelayHandling::PreviewWithHold) => plant.delay_s + 0.5 * t,
@@ -306,12 +310,24 @@ impl PreFilter {
         // Bounded: tau <= 1 ms and the plant's delay < 62 samples keep this far below u32.
         let preview = libm_ceil(lag_samples - 1e-9);
         if preview > params::MAX_PREVIEW_SAMPLES as f64 {
-            return Err(ConfigError::BadTimeConstant);
+            // The preview would be longer than a generator offers: the longest tau that fits.
+            let tau_max = (params::MAX_PREVIEW_SAMPLES as f64 * t - delay_s) / 4.0;
+            return Err(ConfigError::outside(
+                "tau_s",
+                params::PREFILTER_TAU_MIN_S,
+                tau_max,
+            ));
         }
         let direct = delay_s / t;
         let direct_whole = (direct + 1e-9) as usize;
         if direct_whole + 1 >= LINE {
-            return Err(ConfigError::BadTimeConstant);
+            // The direct branch's delay line is too short: the longest delay it holds.
+            let delay_max = (LINE - 1) as f64 * t - (delay_s - plant.delay_s);
+            return Err(ConfigError::out_of_range(
+                "plant.delay_s",
+                Included(0.0),
+                Excluded(delay_max),
+            ));
         }
         let we = 2.0 * PI * plant.amp_pole_hz;
         let wn = 2.0 * PI * plant.mode_hz;
@@ -463,7 +479,10 @@ mod tests {
         let c = PreFilterConfig::default();
         assert_eq!(
             PreFilter::new(&lag, &other_rate, &c),
-            Err(ConfigError::BadRate)
+            Err(ConfigError::new(
+                "plant.period_s",
+                Reason::Mismatch("lag.period_s")
+            ))
         );
     }
 }
