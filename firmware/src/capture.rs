@@ -22,7 +22,7 @@
 //! Per push: one atomic load, one store of 8 bytes, one atomic store: a few cycles.
 //!
 //! # Sizing
-//! `model_core::params::FW_CAPTURE_RECORDS` records of 8 bytes: 1 s at 50 kHz in 400 kB of
+//! [`crate::design_parameters::CAPTURE_RECORDS`] records of 8 bytes: 1 s at 50 kHz in 400 kB of
 //! the AXI SRAM. At other rates the duration scales: 0.25 s at 200 kHz, 5 s at 10 kHz.
 
 use core::cell::UnsafeCell;

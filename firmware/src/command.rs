@@ -4,7 +4,8 @@
 //! glued to the number (`6um`, `4.5v`, `10hz`, `1.5khz`, `0.2ms`), so a value can never be
 //! read in the wrong unit; a bare number is accepted only where the quantity has no unit
 //! (`kc`). Every value is checked here for being finite and inside the range in
-//! `model_core::params` (section "Firmware"); the controller's own constructor checks the
+//! [`crate::design_parameters`] (or `model_core::params` for the loop's own numbers: gain,
+//! rate); the controller's own constructor checks the
 //! combination again when the task builds the new configuration. A line that fails either
 //! check changes nothing and gets `err ...` back.
 //!
@@ -27,6 +28,7 @@
 //!
 //! Parsing takes a `&str` and allocates nothing; a line is at most [`MAX_LINE`] bytes.
 
+use crate::design_parameters;
 use model_core::params;
 
 /// Longest command line accepted, bytes (longer lines are refused whole).
@@ -238,8 +240,8 @@ fn in_range(x: f64, lo: f64, hi: f64) -> Result<f64, ParseError> {
 fn level(word: &str) -> Result<f64, ParseError> {
     in_range(
         quantity(word, Quantity::Level)?,
-        params::FW_REF_MIN_V,
-        params::FW_REF_MAX_V,
+        design_parameters::REF_MIN_V,
+        design_parameters::REF_MAX_V,
     )
 }
 
@@ -252,13 +254,13 @@ fn periodic(words: &[&str]) -> Result<(f64, f64, f64), ParseError> {
     let freq_hz = quantity(f, Quantity::Frequency)?;
     in_range(
         freq_hz,
-        params::FW_REF_MIN_FREQ_HZ,
-        params::FW_REF_MAX_FREQ_HZ,
+        design_parameters::REF_MIN_FREQ_HZ,
+        design_parameters::REF_MAX_FREQ_HZ,
     )?;
     // The whole swing must stay inside the sensor range.
     if amplitude_v < 0.0
-        || offset_v - amplitude_v < params::FW_REF_MIN_V
-        || offset_v + amplitude_v > params::FW_REF_MAX_V
+        || offset_v - amplitude_v < design_parameters::REF_MIN_V
+        || offset_v + amplitude_v > design_parameters::REF_MAX_V
     {
         return Err(ParseError::OutOfRange);
     }
@@ -346,8 +348,8 @@ pub fn parse(line: &str) -> Result<Command, ParseError> {
         "tau" => match args {
             [v] => Ok(Command::Tau(in_range(
                 quantity(v, Quantity::Duration)?,
-                params::FW_TAU_MIN_S,
-                params::FW_TAU_MAX_S,
+                design_parameters::TAU_MIN_S,
+                design_parameters::TAU_MAX_S,
             )?)),
             _ => Err(ParseError::WrongArgumentCount),
         },
@@ -369,8 +371,8 @@ pub fn parse(line: &str) -> Result<Command, ParseError> {
             [g, o] => {
                 let gain = number(g)?;
                 let offset_v = signed_volts(o)?;
-                if (gain - 1.0).abs() <= params::FW_CAL_MAX_GAIN_ERROR
-                    && offset_v.abs() <= params::FW_CAL_MAX_OFFSET_V
+                if (gain - 1.0).abs() <= design_parameters::CAL_MAX_GAIN_ERROR
+                    && offset_v.abs() <= design_parameters::CAL_MAX_OFFSET_V
                 {
                     Ok(Command::Calibrate { gain, offset_v })
                 } else {

@@ -8,6 +8,7 @@
 
 pub mod capture;
 pub mod command;
+pub mod design_parameters;
 pub mod liveness;
 pub mod mailbox;
 pub mod sample;

@@ -6,7 +6,7 @@
 //!   DS1103 convention of `AdcCode` ([`adc_code`]). "Nearly": with standard resistor values
 //!   the front end's gain is 1.3 % below the ideal (so that +-10 V stays inside the pin's
 //!   range) and its offset is not exactly mid-scale. [`AdcCalibration`] corrects both: its
-//!   default is computed from the resistor values in `params`, and the `cal` command replaces
+//!   default is computed from the resistor values in [`crate::design_parameters`], and the `cal` command replaces
 //!   it with figures measured on the board. In closed loop this correction sets the position
 //!   accuracy: the loop regulates what the ADC reports.
 //! * **DAC**: the external 14-bit DAC takes `DacCode::spi_frame()` directly. The internal
@@ -15,6 +15,7 @@
 //! * **Timer**: [`TimerSetting::for_rate`] finds prescaler and auto-reload for a loop rate
 //!   and reports the rate actually obtained (the controller is configured with that rate).
 
+use crate::design_parameters;
 use model_core::{AdcCode, DacCode, params};
 
 /// The `AdcCode` of a right-aligned 16-bit ADC result (0 = -10 V, 65535 = +10 V - 1 LSB).
@@ -38,7 +39,7 @@ pub struct AdcCalibration {
 /// Why a calibration was refused.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum CalibrationError {
-    /// NaN, infinite, or a correction larger than `params::FW_CAL_MAX_*`.
+    /// NaN, infinite, or a correction larger than `design_parameters::CAL_MAX_*`.
     OutOfRange,
 }
 
@@ -49,11 +50,11 @@ impl AdcCalibration {
         offset_v: 0.0,
     };
 
-    /// A checked calibration: gain within 1 +- `FW_CAL_MAX_GAIN_ERROR`, offset within
-    /// +- `FW_CAL_MAX_OFFSET_V`.
+    /// A checked calibration: gain within 1 +- `design_parameters::CAL_MAX_GAIN_ERROR`, offset within
+    /// +- `design_parameters::CAL_MAX_OFFSET_V`.
     pub fn new(gain: f64, offset_v: f64) -> Result<Self, CalibrationError> {
-        let g_ok = (gain - 1.0).abs() <= params::FW_CAL_MAX_GAIN_ERROR;
-        let o_ok = offset_v.abs() <= params::FW_CAL_MAX_OFFSET_V;
+        let g_ok = (gain - 1.0).abs() <= design_parameters::CAL_MAX_GAIN_ERROR;
+        let o_ok = offset_v.abs() <= design_parameters::CAL_MAX_OFFSET_V;
         if g_ok && o_ok {
             Ok(Self {
                 gain: gain as f32,
@@ -95,10 +96,10 @@ impl AdcCalibration {
     /// The default: the README's front end.
     pub fn front_end_default() -> Self {
         Self::from_front_end(
-            params::FW_ADC_R_IN_OHM,
-            params::FW_ADC_R_REF_OHM,
-            params::FW_ADC_R_GND_OHM,
-            params::FW_ADC_VREF_V,
+            design_parameters::ADC_R_IN_OHM,
+            design_parameters::ADC_R_REF_OHM,
+            design_parameters::ADC_R_GND_OHM,
+            design_parameters::ADC_VREF_V,
         )
         .unwrap_or(Self::IDENTITY)
     }

@@ -56,7 +56,7 @@ pub struct LoopConfig {
 }
 
 /// Why settings cannot be applied.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq)]
 pub enum SettingsError {
     /// The controller refused the configuration.
     Config(ConfigError),
@@ -66,6 +66,14 @@ impl core::fmt::Display for SettingsError {
     fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
         match self {
             Self::Config(e) => write!(f, "{e}"),
+        }
+    }
+}
+
+impl core::error::Error for SettingsError {
+    fn source(&self) -> Option<&(dyn core::error::Error + 'static)> {
+        match self {
+            Self::Config(e) => Some(e),
         }
     }
 }
@@ -153,7 +161,7 @@ impl Settings {
         let reference_v = match self.reference {
             ReferenceRequest::Step { level_v } if level_v.is_finite() => level_v as f32,
             ReferenceRequest::Step { .. } => {
-                return Err(SettingsError::Config(ConfigError::NotFinite));
+                return Err(SettingsError::Config(ConfigError::not_finite("level_v")));
             }
             ReferenceRequest::Sine { offset_v, .. }
             | ReferenceRequest::Triangle { offset_v, .. } => offset_v as f32,

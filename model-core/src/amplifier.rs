@@ -21,7 +21,7 @@
 //! previous output (documented safe behaviour; a real amplifier sees a DAC that has no NaN).
 
 use crate::limits::clamp_f32;
-use crate::limits::{ConfigError, check_period};
+use crate::limits::{ConfigError, check_finite, check_period, check_within};
 use crate::params;
 
 /// Amplifier parameters (design time, `f64`).
@@ -56,33 +56,44 @@ impl AmplifierConfig {
     /// Gain within 1..100, ranges non-empty and inside the E-505's own (-2..12 V in, -20..120 V
     /// out), slew within the limiter's 15..1500 V/ms.
     pub fn validate(&self) -> Result<(), ConfigError> {
-        let vals = [
-            self.gain,
-            self.input_range_v.0,
-            self.input_range_v.1,
-            self.output_range_v.0,
-            self.output_range_v.1,
-            self.slew_v_per_s.unwrap_or(1.0),
-        ];
-        if vals.iter().any(|v| !v.is_finite()) {
-            return Err(ConfigError::NotFinite);
-        }
-        if !(self.gain >= 1.0 && self.gain <= 100.0) {
-            return Err(ConfigError::BadGain);
-        }
         let (i0, i1) = self.input_range_v;
         let (o0, o1) = self.output_range_v;
-        let input_ok = params::AMP_INPUT_MIN_V <= i0 && i0 < i1 && i1 <= params::AMP_INPUT_MAX_V;
-        let output_ok = params::AMP_OUTPUT_MIN_V <= o0 && o0 < o1 && o1 <= params::AMP_OUTPUT_MAX_V;
-        if !(input_ok && output_ok) {
-            return Err(ConfigError::BadWindow);
+        for (name, v) in [
+            ("gain", self.gain),
+            ("input_range_v.0", i0),
+            ("input_range_v.1", i1),
+            ("output_range_v.0", o0),
+            ("output_range_v.1", o1),
+            ("slew_v_per_s", self.slew_v_per_s.unwrap_or(1.0)),
+        ] {
+            check_finite(name, v)?;
+        }
+        check_within("gain", self.gain, 1.0, 100.0)?;
+        let (in_lo, in_hi) = (params::AMP_INPUT_MIN_V, params::AMP_INPUT_MAX_V);
+        check_within("input_range_v.0", i0, in_lo, in_hi)?;
+        check_within("input_range_v.1", i1, in_lo, in_hi)?;
+        if i0 >= i1 {
+            return Err(ConfigError::not_below("input_range_v.0", "input_range_v.1"));
+        }
+        let (out_lo, out_hi) = (params::AMP_OUTPUT_MIN_V, params::AMP_OUTPUT_MAX_V);
+        check_within("output_range_v.0", o0, out_lo, out_hi)?;
+        check_within("output_range_v.1", o1, out_lo, out_hi)?;
+        if o0 >= o1 {
+            return Err(ConfigError::not_below(
+                "output_range_v.0",
+                "output_range_v.1",
+            ));
         }
         if let Some(s) = self.slew_v_per_s {
             let tol = 1.0 + 1e-9;
             if !(s * tol >= params::AMP_SLEW_OUTPUT_MIN_V_PER_S
                 && s <= params::AMP_SLEW_OUTPUT_V_PER_S * tol)
             {
-                return Err(ConfigError::BadSlew);
+                return Err(ConfigError::outside(
+                    "slew_v_per_s",
+                    params::AMP_SLEW_OUTPUT_MIN_V_PER_S,
+                    params::AMP_SLEW_OUTPUT_V_PER_S,
+                ));
             }
         }
         Ok(())
@@ -209,28 +220,28 @@ mod tests {
                 slew_v_per_s: Some(1e3),
                 ..c
             }),
-            ConfigError::BadSlew
+            ConfigError::outside("slew_v_per_s", 1.5e4, 1.5e6)
         );
         assert_eq!(
             bad(AmplifierConfig {
                 slew_v_per_s: Some(2e6),
                 ..c
             }),
-            ConfigError::BadSlew
+            ConfigError::outside("slew_v_per_s", 1.5e4, 1.5e6)
         );
         assert_eq!(
             bad(AmplifierConfig {
                 output_range_v: (0.0, 150.0),
                 ..c
             }),
-            ConfigError::BadWindow
+            ConfigError::outside("output_range_v.1", -20.0, 120.0)
         );
         assert_eq!(
             bad(AmplifierConfig {
                 gain: f64::NAN,
                 ..c
             }),
-            ConfigError::NotFinite
+            ConfigError::not_finite("gain")
         );
         let mut s = AmplifierState::default();
         let a = Amplifier::new(&c, t).unwrap();

@@ -43,7 +43,7 @@
 use crate::codes::{AdcCode, DacCode};
 use crate::hysteresis::{HysteresisMemory, HysteresisTable};
 use crate::lag::{LagCompensator, LagConfig, LagState};
-use crate::limits::{ConfigError, Flags};
+use crate::limits::{ConfigError, Flags, Reason, check_finite};
 use crate::params;
 use crate::plant::LinearPlantConfig;
 use crate::prefilter::{PreFilter, PreFilterConfig, PreFilterState};
@@ -189,11 +189,14 @@ impl Controller {
     /// the window.
     pub fn new(c: &ControllerConfig) -> Result<Self, ConfigError> {
         let lag = LagCompensator::new(&c.lag)?;
-        if !c.safe_v.is_finite() {
-            return Err(ConfigError::NotFinite);
-        }
+        check_finite("safe_v", c.safe_v)?;
         if !lag.limits.contains(c.safe_v as f32) {
-            return Err(ConfigError::BadWindow);
+            let l = lag.limits;
+            return Err(ConfigError::outside(
+                "safe_v",
+                l.min_v as f64,
+                l.max_v as f64,
+            ));
         }
         let period_s = c.lag.period_s;
         let plant = LinearPlantConfig {
@@ -210,7 +213,8 @@ impl Controller {
         let (y0, y1) = c.hysteresis.output_range_v();
         let slope = (y1 - y0) / (u1 - u0);
         if !(slope.is_finite() && slope > 0.0) {
-            return Err(ConfigError::BadTable);
+            // The table's output must rise over its input range.
+            return Err(ConfigError::new("hysteresis", Reason::NotMonotone));
         }
         Ok(Self {
             lag,

@@ -38,7 +38,7 @@
 //! cubic, three multiply-adds and three compensated sums.
 
 use crate::limits::clamp_f32;
-use crate::limits::{ConfigError, check_period};
+use crate::limits::{ConfigError, Reason, check_finite, check_period, check_within};
 use crate::params;
 use crate::sections::{Accumulator, FirstOrderLag};
 
@@ -111,33 +111,37 @@ impl DriftConfig {
     /// 1 us..10^5 s, a non-empty range, and `w(u)` strictly increasing on -20..20 V (so that
     /// the drift is invertible and a larger input never drifts less).
     pub fn validate(&self) -> Result<(), ConfigError> {
-        let range = [self.poly_range_v.0, self.poly_range_v.1];
-        let mut all = self
-            .gains
-            .iter()
-            .chain(&self.taus_s)
-            .chain(&self.poly)
-            .chain(&range);
-        if all.any(|v| !v.is_finite()) {
-            return Err(ConfigError::NotFinite);
+        for g in self.gains {
+            check_finite("gains", g)?;
         }
-        if self.taus_s.iter().any(|t| !(*t >= 1e-6 && *t <= 1e5)) {
-            return Err(ConfigError::BadTimeConstant);
+        for t in self.taus_s {
+            check_finite("taus_s", t)?;
         }
-        if self.gains.iter().any(|g| g.abs() > 1.0)
-            || self.poly.iter().any(|c| c.abs() > 100.0)
-            || self.poly_range_v.0 >= self.poly_range_v.1
-            || self.poly_range_v.0 < -20.0
-            || self.poly_range_v.1 > 20.0
-        {
-            return Err(ConfigError::BadGain);
+        for c in self.poly {
+            check_finite("poly", c)?;
+        }
+        check_finite("poly_range_v.0", self.poly_range_v.0)?;
+        check_finite("poly_range_v.1", self.poly_range_v.1)?;
+        for t in self.taus_s {
+            check_within("taus_s", t, 1e-6, 1e5)?;
+        }
+        for g in self.gains {
+            check_within("gains", g, -1.0, 1.0)?;
+        }
+        for c in self.poly {
+            check_within("poly", c, -100.0, 100.0)?;
+        }
+        check_within("poly_range_v.0", self.poly_range_v.0, -20.0, 20.0)?;
+        check_within("poly_range_v.1", self.poly_range_v.1, -20.0, 20.0)?;
+        if self.poly_range_v.0 >= self.poly_range_v.1 {
+            return Err(ConfigError::not_below("poly_range_v.0", "poly_range_v.1"));
         }
         // Monotone weight on a fine grid (bounded loop, design time).
         let mut last = self.weight(-20.0);
         for i in 1..=4000 {
             let w = self.weight(-20.0 + 40.0 * i as f64 / 4000.0);
             if w <= last {
-                return Err(ConfigError::BadGain);
+                return Err(ConfigError::new("weight(u)", Reason::NotMonotone));
             }
             last = w;
         }
@@ -263,11 +267,17 @@ mod tests {
             poly: [0.6, -1.0, 0.0, 0.0],
             ..c
         };
-        assert_eq!(bad.validate(), Err(ConfigError::BadGain));
+        assert_eq!(
+            bad.validate(),
+            Err(ConfigError::new("weight(u)", Reason::NotMonotone))
+        );
         let bad = DriftConfig {
             taus_s: [0.0, 1.0, 1.0],
             ..c
         };
-        assert_eq!(bad.validate(), Err(ConfigError::BadTimeConstant));
+        assert_eq!(
+            bad.validate(),
+            Err(ConfigError::outside("taus_s", 1e-6, 1e5))
+        );
     }
 }

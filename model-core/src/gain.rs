@@ -17,7 +17,7 @@
 //! increasing (slope `1 + 0.04 u - 0.003 u^2 >= 1` on 0..10 V), checked by
 //! [`FastGainConfig::validate`].
 
-use crate::limits::ConfigError;
+use crate::limits::{ConfigError, Reason, check_finite, check_within};
 use crate::params;
 
 /// K'(u) (design time, `f64`).
@@ -49,21 +49,25 @@ impl FastGainConfig {
     /// Finite, K' within 0.2..5 over the range, non-empty range inside -20..20 V, and
     /// `K'(u) u` strictly increasing on -20..20 V.
     pub fn validate(&self) -> Result<(), ConfigError> {
-        if self.poly.iter().any(|v| !v.is_finite())
-            || !self.range_v.0.is_finite()
-            || !self.range_v.1.is_finite()
-        {
-            return Err(ConfigError::NotFinite);
+        for c in self.poly {
+            check_finite("poly", c)?;
         }
-        if !(self.range_v.0 < self.range_v.1 && self.range_v.0 >= -20.0 && self.range_v.1 <= 20.0) {
-            return Err(ConfigError::BadGain);
+        check_finite("range_v.0", self.range_v.0)?;
+        check_finite("range_v.1", self.range_v.1)?;
+        check_within("range_v.0", self.range_v.0, -20.0, 20.0)?;
+        check_within("range_v.1", self.range_v.1, -20.0, 20.0)?;
+        if self.range_v.0 >= self.range_v.1 {
+            return Err(ConfigError::not_below("range_v.0", "range_v.1"));
         }
         let mut last = f64::NEG_INFINITY;
         for i in 0..=4000 {
             let u = -20.0 + 40.0 * i as f64 / 4000.0;
             let k = self.gain(u);
-            if !(0.2..=5.0).contains(&k) || k * u <= last {
-                return Err(ConfigError::BadGain);
+            if !(0.2..=5.0).contains(&k) {
+                return Err(ConfigError::outside("gain(u)", 0.2, 5.0));
+            }
+            if k * u <= last {
+                return Err(ConfigError::new("gain(u) u", Reason::NotMonotone));
             }
             last = k * u;
         }
@@ -116,11 +120,14 @@ mod tests {
             poly: [1.0, -0.5, 0.0],
             ..FastGainConfig::default()
         };
-        assert_eq!(FastGain::new(&c), Err(ConfigError::BadGain));
+        assert_eq!(
+            FastGain::new(&c),
+            Err(ConfigError::new("gain(u) u", Reason::NotMonotone))
+        );
         let c = FastGainConfig {
             poly: [f64::NAN, 0.0, 0.0],
             ..FastGainConfig::default()
         };
-        assert_eq!(FastGain::new(&c), Err(ConfigError::NotFinite));
+        assert_eq!(FastGain::new(&c), Err(ConfigError::not_finite("poly")));
     }
 }

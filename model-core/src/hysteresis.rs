@@ -95,8 +95,9 @@
 //!   them; call [`HysteresisMemory::reset`] after swapping tables.
 
 use crate::limits::clamp_f32;
-use crate::limits::{ConfigError, Flags};
+use crate::limits::{ConfigError, Flags, Reason, check_finite, check_range, check_within};
 use crate::params;
+use core::ops::Bound::{Excluded, Included};
 
 /// Nodes per axis of the Everett grid.
 pub const GRID_NODES: usize = params::HYST_GRID_NODES;
@@ -139,10 +140,11 @@ impl HysteresisTable {
     /// the Everett values `E(alpha_i, beta_j)` at nodes `u_min + k (u_max - u_min) /
     /// (GRID_NODES - 1)`, packed row by row as [`packed_index`] says.
     ///
-    /// Refuses: non-finite values ([`ConfigError::NotFinite`]); a range that is empty or leaves
-    /// the amplifier's -2..12 V ([`ConfigError::BadWindow`]); a slice that is not
-    /// [`TABLE_LEN`] long, a negative value, or a grid that decreases with `alpha` or increases
-    /// with `beta` ([`ConfigError::BadTable`]), which would make a branch non-monotone.
+    /// Refuses, naming the argument: non-finite values ([`Reason::NotFinite`]); a range that
+    /// leaves the amplifier's -2..12 V ([`Reason::OutOfRange`]) or is empty
+    /// ([`Reason::NotBelow`]); a slice that is not [`TABLE_LEN`] long
+    /// ([`Reason::WrongLength`]); a negative value, or a grid that decreases with `alpha` or
+    /// increases with `beta` ([`Reason::NotMonotone`]), which would make a branch non-monotone.
     ///
     /// ```
     /// use model_core::hysteresis::{HysteresisMemory, HysteresisTable, GRID_NODES, packed_index, TABLE_LEN};
@@ -165,38 +167,39 @@ impl HysteresisTable {
         offset_v: f32,
         everett_v: &[f32],
     ) -> Result<Self, ConfigError> {
-        if !(u_min_v.is_finite() && u_max_v.is_finite() && offset_v.is_finite()) {
-            return Err(ConfigError::NotFinite);
-        }
-        let lo = params::AMP_INPUT_MIN_V as f32;
-        let hi = params::AMP_INPUT_MAX_V as f32;
-        if !(lo <= u_min_v && u_min_v < u_max_v && u_max_v <= hi) {
-            return Err(ConfigError::BadWindow);
+        check_finite("u_min_v", u_min_v as f64)?;
+        check_finite("u_max_v", u_max_v as f64)?;
+        check_finite("offset_v", offset_v as f64)?;
+        let (lo, hi) = (params::AMP_INPUT_MIN_V, params::AMP_INPUT_MAX_V);
+        check_within("u_min_v", u_min_v as f64, lo, hi)?;
+        check_within("u_max_v", u_max_v as f64, lo, hi)?;
+        if u_min_v >= u_max_v {
+            return Err(ConfigError::not_below("u_min_v", "u_max_v"));
         }
         if everett_v.len() != TABLE_LEN {
-            return Err(ConfigError::BadTable);
+            return Err(ConfigError::new(
+                "everett_v",
+                Reason::WrongLength {
+                    expected: TABLE_LEN,
+                    found: everett_v.len(),
+                },
+            ));
         }
-        let mut table = Self {
-            u_min_v,
-            u_max_v,
-            step_v: (u_max_v - u_min_v) / (GRID_NODES - 1) as f32,
-            inv_step_per_v: (GRID_NODES - 1) as f32 / (u_max_v - u_min_v),
-            offset_v,
-            everett_v: [0.0; TABLE_LEN],
-        };
-        for (dst, src) in table.everett_v.iter_mut().zip(everett_v) {
+        let mut grid = [0.0; TABLE_LEN];
+        for (dst, src) in grid.iter_mut().zip(everett_v) {
             if !src.is_finite() {
-                return Err(ConfigError::NotFinite);
+                return Err(ConfigError::not_finite("everett_v"));
             }
             *dst = *src;
         }
+        let table = Self::from_checked_grid(u_min_v, u_max_v, offset_v, grid);
         // Monotone: E(i, j) >= E(i - 1, j) (rising in alpha; E(j, j) = 0) and
         // E(i, j) >= E(i, j + 1) (falling in beta; E(i, i) = 0).
         for i in 1..GRID_NODES {
             for j in 0..i {
                 let e = table.node(i, j);
                 if e < table.node(i - 1, j) || e < table.node(i, j + 1) {
-                    return Err(ConfigError::BadTable);
+                    return Err(ConfigError::new("everett_v", Reason::NotMonotone));
                 }
             }
         }
@@ -209,7 +212,7 @@ impl HysteresisTable {
     /// `loop_width_frac` of that span (at mid-range: `k2 R^2 / 2`). Design time, `f64`.
     ///
     /// `dc_gain` in `(0, 10]`, `loop_width_frac` in `[0, 0.5]` (beyond that the reversal
-    /// slope `k1` would be negative), otherwise [`ConfigError::BadGain`].
+    /// slope `k1` would be negative), otherwise [`Reason::OutOfRange`] naming the argument.
     ///
     /// ```
     /// use model_core::hysteresis::HysteresisTable;
@@ -225,21 +228,44 @@ impl HysteresisTable {
         dc_gain: f64,
         loop_width_frac: f64,
     ) -> Result<Self, ConfigError> {
-        if !(u_min_v.is_finite()
-            && u_max_v.is_finite()
-            && offset_v.is_finite()
-            && dc_gain.is_finite()
-            && loop_width_frac.is_finite())
-        {
-            return Err(ConfigError::NotFinite);
+        check_finite("u_min_v", u_min_v)?;
+        check_finite("u_max_v", u_max_v)?;
+        check_finite("offset_v", offset_v)?;
+        check_range("dc_gain", dc_gain, Excluded(0.0), Included(10.0))?;
+        check_within("loop_width_frac", loop_width_frac, 0.0, 0.5)?;
+        if u_min_v >= u_max_v {
+            return Err(ConfigError::not_below("u_min_v", "u_max_v"));
         }
-        if !(dc_gain > 0.0 && dc_gain <= 10.0 && (0.0..=0.5).contains(&loop_width_frac)) {
-            return Err(ConfigError::BadGain);
+        let e = Self::quadratic_grid(u_min_v, u_max_v, dc_gain, loop_width_frac);
+        Self::from_grid(u_min_v as f32, u_max_v as f32, offset_v as f32, &e)
+    }
+
+    /// The table without checks: for grids [`Self::from_grid`] has checked or the thesis
+    /// default, whose constants a unit test checks.
+    fn from_checked_grid(
+        u_min_v: f32,
+        u_max_v: f32,
+        offset_v: f32,
+        everett_v: [f32; TABLE_LEN],
+    ) -> Self {
+        Self {
+            u_min_v,
+            u_max_v,
+            step_v: (u_max_v - u_min_v) / (GRID_NODES - 1) as f32,
+            inv_step_per_v: (GRID_NODES - 1) as f32 / (u_max_v - u_min_v),
+            offset_v,
+            everett_v,
         }
+    }
+
+    /// The Everett grid of [`Self::quadratic_everett`] (`u_min_v < u_max_v`).
+    fn quadratic_grid(
+        u_min_v: f64,
+        u_max_v: f64,
+        dc_gain: f64,
+        loop_width_frac: f64,
+    ) -> [f32; TABLE_LEN] {
         let range = u_max_v - u_min_v;
-        if range <= 0.0 {
-            return Err(ConfigError::BadWindow);
-        }
         let span = dc_gain * range;
         let k2 = 2.0 * loop_width_frac * span / (range * range);
         let k1 = (span - k2 * range * range) / range;
@@ -253,7 +279,7 @@ impl HysteresisTable {
                 }
             }
         }
-        Self::from_grid(u_min_v as f32, u_max_v as f32, offset_v as f32, &e)
+        e
     }
 
     /// The default table of the thesis stage, from our documented assumption (`params`,
@@ -270,38 +296,25 @@ impl HysteresisTable {
     /// assert!(down - up > 1.0); // the loop is about 1.46 V wide at mid-range
     /// ```
     pub fn thesis_default() -> Self {
-        match Self::quadratic_everett(
+        // The constants pass `quadratic_everett`'s checks (unit test
+        // `thesis_default_is_the_checked_quadratic_table`), so the grid is built unchecked
+        // and this cannot fail.
+        let (lo, hi) = (
             params::HYST_DEFAULT_INPUT_MIN_V,
             params::HYST_DEFAULT_INPUT_MAX_V,
-            params::HYST_DEFAULT_OFFSET_V,
+        );
+        let e = Self::quadratic_grid(
+            lo,
+            hi,
             params::HYST_DEFAULT_DC_GAIN,
             params::HYST_DEFAULT_LOOP_WIDTH_FRAC,
-        ) {
-            Ok(t) => t,
-            // The constants are valid (checked by a unit test); a linear table if not.
-            Err(_) => Self::linear_fallback(),
-        }
-    }
-
-    fn linear_fallback() -> Self {
-        let span_v = (params::HYST_DEFAULT_INPUT_MAX_V - params::HYST_DEFAULT_INPUT_MIN_V) as f32;
-        let step = span_v / (GRID_NODES - 1) as f32;
-        let mut e = [0.0f32; TABLE_LEN];
-        for i in 1..GRID_NODES {
-            for j in 0..i {
-                if let Some(slot) = packed_index(i, j).and_then(|k| e.get_mut(k)) {
-                    *slot = params::HYST_DEFAULT_DC_GAIN as f32 * step * (i - j) as f32;
-                }
-            }
-        }
-        Self {
-            u_min_v: 0.0,
-            u_max_v: 10.0,
-            step_v: step,
-            inv_step_per_v: 1.0 / step,
-            offset_v: 0.0,
-            everett_v: e,
-        }
+        );
+        Self::from_checked_grid(
+            lo as f32,
+            hi as f32,
+            params::HYST_DEFAULT_OFFSET_V as f32,
+            e,
+        )
     }
 
     /// Input range `(u_min, u_max)`, volts at the amplifier input.
@@ -979,6 +992,18 @@ mod tests {
     }
 
     #[test]
+    fn thesis_default_is_the_checked_quadratic_table() {
+        let checked = HysteresisTable::quadratic_everett(
+            params::HYST_DEFAULT_INPUT_MIN_V,
+            params::HYST_DEFAULT_INPUT_MAX_V,
+            params::HYST_DEFAULT_OFFSET_V,
+            params::HYST_DEFAULT_DC_GAIN,
+            params::HYST_DEFAULT_LOOP_WIDTH_FRAC,
+        );
+        assert_eq!(checked, Ok(HysteresisTable::thesis_default()));
+    }
+
+    #[test]
     fn minor_loop_closes_and_wipes() {
         let t = HysteresisTable::thesis_default();
         let mut m = HysteresisMemory::new();
@@ -996,29 +1021,35 @@ mod tests {
         let mut e = *HysteresisTable::thesis_default().everett_grid_v();
         assert_eq!(
             HysteresisTable::from_grid(0.0, 10.0, 0.0, &e[..5]),
-            Err(ConfigError::BadTable)
+            Err(ConfigError::new(
+                "everett_v",
+                Reason::WrongLength {
+                    expected: TABLE_LEN,
+                    found: 5
+                }
+            ))
         );
         assert_eq!(
             HysteresisTable::from_grid(5.0, 5.0, 0.0, &e),
-            Err(ConfigError::BadWindow)
+            Err(ConfigError::not_below("u_min_v", "u_max_v"))
         );
         assert_eq!(
             HysteresisTable::from_grid(0.0, 20.0, 0.0, &e),
-            Err(ConfigError::BadWindow)
+            Err(ConfigError::outside("u_max_v", -2.0, 12.0))
         );
         assert_eq!(
             HysteresisTable::from_grid(0.0, f32::NAN, 0.0, &e),
-            Err(ConfigError::NotFinite)
+            Err(ConfigError::not_finite("u_max_v"))
         );
         e[100] = f32::INFINITY;
         assert_eq!(
             HysteresisTable::from_grid(0.0, 10.0, 0.0, &e),
-            Err(ConfigError::NotFinite)
+            Err(ConfigError::not_finite("everett_v"))
         );
         e[100] = -1.0;
         assert_eq!(
             HysteresisTable::from_grid(0.0, 10.0, 0.0, &e),
-            Err(ConfigError::BadTable)
+            Err(ConfigError::new("everett_v", Reason::NotMonotone))
         );
     }
 }

@@ -11,17 +11,18 @@
 //! Nyquist rate, and at the 3000 rad/s crossover Tustin's frequency warp is 0.1 %. ZOH would
 //! add a sample of delay (3.5 deg of phase at crossover).
 //!
-//! # Realisation: parallel form, delta updates, compensated sums
+//! # Realisation: parallel form, two delta-form sections, compensated sums
 //! Partial fractions split the compensator into an integrator and a first-order lag:
 //!
 //! ```text
 //! G_c(s) = Kc z / s  +  Kc (p - z) / (s + p)
 //! ```
 //!
-//! Each is discretised by Tustin on its own, with `e_s = e[n] + e[n-1]`:
+//! Each is one [`FirstOrder`] section of [`crate::sections`] (Tustin, delta form), both fed
+//! the error, with `e_s = e[n] + e[n-1]`:
 //!
 //! ```text
-//! v[n] = v[n-1] + (Kc z T / 2) e_s
+//! v[n] = v[n-1] + (Kc z T / 2) e_s                                       (alpha = 0, bd = 0)
 //! w[n] = w[n-1] + b e_s - alpha w[n-1],  alpha = p T / (1 + p T/2),  b = Kc (p - z) (T/2) / (1 + p T/2)
 //! u[n] = v[n] + w[n]
 //! ```
@@ -29,10 +30,14 @@
 //! `alpha` is `1 - a` computed without cancellation (no `exp` is needed: Tustin is rational),
 //! so the lag pole `a = 1 - 7.96e-6` is exact to `f32` relative precision, where a direct form
 //! would round `a` itself to the nearest `f32` (spacing 6e-8, a 0.75 % error on `1 - a`) and
-//! misplace the lag pole and zero. The states `v` and `w` are
+//! misplace the lag pole and zero. The sections' outputs `v` and `w` are kept in
 //! [`Accumulator`]s so the per-step increments (often 1e-6 of the state) are not lost to
-//! rounding; see [`crate::sections`]. The test in host-tests compares this against an
-//! independent `f64` direct-form reference for 1e6 steps: DAC codes agree within 1 LSB.
+//! rounding. Why not one second-order section: its two poles (z = 1 and 1 - 8e-6) and its zero
+//! would all sit near 1, and the anti-windup below needs the integrator's and the lag's
+//! shares of the command apart. The parallel form costs one duplicated input history and the
+//! integrator's two zero-weight terms (a few instructions). The test in host-tests compares
+//! this against an independent `f64` direct-form reference for 1e6 steps: DAC codes agree
+//! within 1 LSB.
 //!
 //! # Limits and anti-windup
 //! The command passes through [`OutputLimits::apply`] (NaN guard, slew limit, window). When
@@ -44,10 +49,10 @@
 //! always describe the sent command and the output leaves the limit as soon as the error
 //! changes sign.
 //!
-//! # Hold and reset
-//! [`LagState::hold`] freezes the states and the command; releasing continues from the same
-//! command (bumpless). [`LagState::reset_to`] loads the states so that the next command equals
-//! a given value with zero error (bumpless hand-over from open loop or from the safe value).
+//! # Reset
+//! [`LagState::reset_to`] loads the states so that the next command equals a given value with
+//! zero error (bumpless hand-over from open loop, from hold or from the safe value; holding the
+//! command is the controller's business, [`crate::controller`]).
 //!
 //! # Example
 //! ```
@@ -58,9 +63,10 @@
 //! assert!(u > 2.0 && u < 2.001);
 //! ```
 
-use crate::limits::{ConfigError, Flags, OutputLimits, check_period};
+use crate::limits::{ConfigError, Flags, OutputLimits, check_finite, check_period, check_range};
 use crate::params;
-use crate::sections::Accumulator;
+use crate::sections::{Accumulator, FirstOrder, FirstOrderState};
+use core::ops::Bound::{Excluded, Included};
 
 /// The continuous parameters, the sample period and the limits. Built into a
 /// [`LagCompensator`] by [`LagCompensator::new`].
@@ -101,12 +107,11 @@ impl Default for LagConfig {
 /// built outside the interrupt and swapped in whole.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct LagCompensator {
-    /// `Kc z T / 2`.
-    pub int_gain: f32,
-    /// `Kc (p - z) (T/2) / (1 + p T/2)`.
-    pub lag_gain: f32,
-    /// `1 - a = p T / (1 + p T/2)`.
-    pub lag_alpha: f32,
+    /// `Kc z / s` after Tustin: `bs = Kc z T / 2`, `bd = alpha = 0`.
+    pub integrator: FirstOrder,
+    /// `Kc (p - z) / (s + p)` after Tustin: `bs = Kc (p - z) (T/2) / (1 + p T/2)`,
+    /// `alpha = 1 - a = p T / (1 + p T/2)`, `bd = 0`.
+    pub lag: FirstOrder,
     /// The last stage.
     pub limits: OutputLimits,
 }
@@ -114,30 +119,25 @@ pub struct LagCompensator {
 impl LagCompensator {
     /// Discretise `config`. Refuses non-finite values, rates outside 10..200 kHz, `Kc` outside
     /// `(0, 1e6]`, a zero or pole that is not positive or above 1/100 of the sample rate
-    /// (rad/s), and bad limits.
+    /// (rad/s), and bad limits; the error names the field of [`LagConfig`].
     pub fn new(config: &LagConfig) -> Result<Self, ConfigError> {
         let c = config;
-        if !(c.kc.is_finite() && c.zero_rad_s.is_finite() && c.pole_rad_s.is_finite()) {
-            return Err(ConfigError::NotFinite);
-        }
+        check_finite("kc", c.kc)?;
+        check_finite("zero_rad_s", c.zero_rad_s)?;
+        check_finite("pole_rad_s", c.pole_rad_s)?;
         let t = check_period(c.period_s)?;
-        let corner_max = 0.01 / t;
-        if !(c.kc > 0.0
-            && c.kc <= params::LAG_KC_MAX
-            && c.zero_rad_s > 0.0
-            && c.zero_rad_s <= corner_max
-            && c.pole_rad_s > 0.0
-            && c.pole_rad_s <= corner_max)
-        {
-            return Err(ConfigError::BadGain);
-        }
+        let corner = (Excluded(0.0), Included(0.01 / t));
+        check_range("kc", c.kc, Excluded(0.0), Included(params::LAG_KC_MAX))?;
+        check_range("zero_rad_s", c.zero_rad_s, corner.0, corner.1)?;
+        check_range("pole_rad_s", c.pole_rad_s, corner.0, corner.1)?;
         let limits = OutputLimits::new(c.min_v, c.max_v, c.slew_v_per_s, t)?;
-        let half = 0.5 * t;
-        let den = 1.0 + c.pole_rad_s * half;
         Ok(Self {
-            int_gain: (c.kc * c.zero_rad_s * half) as f32,
-            lag_gain: (c.kc * (c.pole_rad_s - c.zero_rad_s) * half / den) as f32,
-            lag_alpha: (c.pole_rad_s * t / den) as f32,
+            integrator: FirstOrder::tustin([0.0, c.kc * c.zero_rad_s], [1.0, 0.0], t),
+            lag: FirstOrder::tustin(
+                [0.0, c.kc * (c.pole_rad_s - c.zero_rad_s)],
+                [1.0, c.pole_rad_s],
+                t,
+            ),
             limits,
         })
     }
@@ -168,9 +168,6 @@ impl LagCompensator {
         error_v: f32,
         feedforward_v: f32,
     ) -> (f32, Flags) {
-        if state.held {
-            return (state.last_v, Flags::HELD);
-        }
         if !error_v.is_finite() {
             return (state.last_v, Flags::NONFINITE);
         }
@@ -179,13 +176,10 @@ impl LagCompensator {
         } else {
             (0.0, Flags::NONFINITE)
         };
-        let e_sum = error_v + state.e_prev;
-        state.e_prev = error_v;
-        let lag_before = state.lag;
-        state.integ.add(self.int_gain * e_sum);
-        let w = state.lag.value();
-        state.lag.add(self.lag_gain * e_sum - self.lag_alpha * w);
-        let raw = state.integ.value() + state.lag.value() + ff;
+        let lag_before = state.lag.y;
+        let v = self.integrator.step(&mut state.integ, error_v);
+        let w = self.lag.step(&mut state.lag, error_v);
+        let raw = v + w + ff;
         let (out, flags) = self.limits.apply(state.last_v, raw);
         if flags.contains(Flags::NONFINITE) {
             // The states overflowed: restart them from the last safe command.
@@ -193,44 +187,45 @@ impl LagCompensator {
         } else if out != raw {
             // Anti-windup: the lag state keeps its value from before this step and the
             // integrator takes up the rest, so the states describe the command really sent.
-            state.lag = lag_before;
+            state.lag.y = lag_before;
             state
                 .integ
-                .add(out - (state.integ.value() + state.lag.value() + ff));
+                .y
+                .add(out - (state.integ.y.value() + state.lag.y.value() + ff));
         }
         state.last_v = out;
         (out, flags | ff_flags)
     }
 }
 
-/// The compensator's history: the state half.
+/// The compensator's history: the state half. Both sections' outputs are compensated sums;
+/// both keep the last error as their input history.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct LagState {
-    integ: Accumulator,
-    lag: Accumulator,
-    e_prev: f32,
+    integ: FirstOrderState<Accumulator>,
+    lag: FirstOrderState<Accumulator>,
     last_v: f32,
-    held: bool,
 }
 
 impl LagState {
     /// A state whose command is `output_v` with no error history.
     pub fn new(output_v: f32) -> Self {
         let mut s = Self {
-            integ: Accumulator::default(),
-            lag: Accumulator::default(),
-            e_prev: 0.0,
+            integ: FirstOrderState::default(),
+            lag: FirstOrderState::default(),
             last_v: 0.0,
-            held: false,
         };
         s.reset_to(output_v);
         s
     }
 
+    /// The integrator holds `output_v`, the lag is empty, no error history.
     fn reload(&mut self, output_v: f32) {
-        self.integ.set(output_v);
-        self.lag.set(0.0);
-        self.e_prev = 0.0;
+        self.integ = FirstOrderState {
+            x: 0.0,
+            y: Accumulator::new(output_v),
+        };
+        self.lag = FirstOrderState::default();
     }
 
     /// Bumpless reset: the next command continues from `output_v` (a non-finite value is
@@ -254,16 +249,6 @@ impl LagState {
         }
     }
 
-    /// Freeze (`true`) or release (`false`) the compensator; the command stays where it is.
-    pub fn hold(&mut self, on: bool) {
-        self.held = on;
-    }
-
-    /// True while held.
-    pub fn is_held(&self) -> bool {
-        self.held
-    }
-
     /// The last command, volts.
     pub fn output_v(&self) -> f32 {
         self.last_v
@@ -271,7 +256,7 @@ impl LagState {
 
     /// The integrator's part of the command, volts.
     pub fn integrator_v(&self) -> f32 {
-        self.integ.value()
+        self.integ.y.value()
     }
 }
 
@@ -310,14 +295,11 @@ mod tests {
     }
 
     #[test]
-    fn hold_and_nan_keep_the_command() {
+    fn nan_keeps_the_command() {
         let lag = LagCompensator::new(&LagConfig::default()).unwrap();
         let mut s = LagState::new(3.0);
         let u = lag.update(&mut s, 0.01);
         assert_eq!(lag.update_flags(&mut s, f32::NAN), (u, Flags::NONFINITE));
-        s.hold(true);
-        assert_eq!(lag.update(&mut s, 1.0), u);
-        s.hold(false);
         assert!(lag.update(&mut s, 0.0) > u);
     }
 }

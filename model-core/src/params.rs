@@ -1,5 +1,7 @@
 //! Every number of the loop, in one place, with the thesis section it comes from or the
 //! words "our assumption". Design-time values are `f64`; the per-sample code works in `f32`.
+//! The board's own numbers (resistors, baud, SPI clock, watchdog, capture size, command
+//! limits) live in the firmware crate, `firmware::design_parameters`.
 //!
 //! Thesis: "Modelling and Control of Piezoelectric Actuators" (Purdue, 2001), summarised in
 //! `shared/model-card.md`.
@@ -211,53 +213,6 @@ pub const MAX_DELAY_S: f64 = 1.0e-3;
 // Stage simulation step.
 /// Fixed step of the stage model (the loop rate, sec. 2.3.1).
 pub const STAGE_PERIOD_S: f64 = 1.0 / SAMPLE_RATE_HZ;
-// ----- Firmware: board, command limits, capture (issue #5; our assumptions). -----
-/// Records the firmware's capture buffer holds: 1 s at 50 kHz. At 8 bytes a record
-/// (`frame::RECORD_LEN`) that is 400 kB of the H743's 512 KiB AXI SRAM (our assumption).
-pub const FW_CAPTURE_RECORDS: usize = 50_000;
-/// Baud rate of the command and capture link over the ST-LINK virtual COM port (USART3);
-/// the ST-LINK V3 bridges it to USB (our assumption).
-pub const FW_UART_BAUD: u32 = 921_600;
-/// Highest frequency of an on-board sine or triangle reference, Hz: twice the closed-loop
-/// bandwidth of about 1 kHz (model card); our assumption.
-pub const FW_REF_MAX_FREQ_HZ: f64 = 2_000.0;
-/// Lowest frequency of an on-board sine or triangle reference, Hz (our assumption).
-pub const FW_REF_MIN_FREQ_HZ: f64 = 0.001;
-/// Lowest sensor monitor voltage a reference may ask for, volts (E-509 range 0..10 V, sec. 2.4).
-pub const FW_REF_MIN_V: f64 = 0.0;
-/// Highest sensor monitor voltage a reference may ask for, volts (10 V = 12 um, sec. 2.4).
-pub const FW_REF_MAX_V: f64 = 10.0;
-/// Shortest pre-filter time constant a command may set, seconds (our assumption).
-pub const FW_TAU_MIN_S: f64 = 1.0e-6;
-/// Longest pre-filter time constant a command may set, seconds (our assumption).
-pub const FW_TAU_MAX_S: f64 = 0.1;
-/// Independent watchdog (IWDG) timeout, seconds: the chip resets if the interrupt or the
-/// tasks stop for this long (our assumption).
-pub const FW_IWDG_TIMEOUT_S: f64 = 0.1;
-/// How often the supervisor task checks liveness and may feed the IWDG, seconds.
-pub const FW_SUPERVISOR_PERIOD_S: f64 = 0.01;
-/// The interrupt raises the watchdog fault (and ramps to safe) when the tasks have not
-/// checked in for this long, seconds: well before the IWDG bites (our assumption).
-pub const FW_TASK_STALL_S: f64 = 0.05;
-/// Heartbeat LED half period, seconds.
-pub const FW_HEARTBEAT_HALF_PERIOD_S: f64 = 0.25;
-/// SPI clock of the external DAC, Hz (DAC8311 allows 50 MHz, AD5641 30 MHz; our choice leaves
-/// margin for wiring): a 16-bit frame takes 1.3 us.
-pub const FW_DAC_SPI_HZ: u32 = 12_500_000;
-/// ADC front end (firmware README): series resistor from the sensor monitor to the buffer
-/// input, ohms (our design).
-pub const FW_ADC_R_IN_OHM: f64 = 100.0e3;
-/// ADC front end: resistor from VREF+ to the buffer input, ohms (E96; our design).
-pub const FW_ADC_R_REF_OHM: f64 = 32.4e3;
-/// ADC front end: resistor from the buffer input to ground, ohms (E96; our design).
-pub const FW_ADC_R_GND_OHM: f64 = 48.7e3;
-/// VREF+ of the NUCLEO-H743ZI2 (tied to VDDA, 3.3 V; UM2407).
-pub const FW_ADC_VREF_V: f64 = 3.3;
-/// Largest gain correction a `cal` command may set (our assumption: +-10 %).
-pub const FW_CAL_MAX_GAIN_ERROR: f64 = 0.1;
-/// Largest offset correction a `cal` command may set, volts (our assumption).
-pub const FW_CAL_MAX_OFFSET_V: f64 = 0.5;
-
 // =====================================================================================
 // ----- The model-gap workflow (issue #7): fitted hysteresis form. -----
 // =====================================================================================

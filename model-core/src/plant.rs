@@ -20,9 +20,10 @@
 //! `f32` state update is accurate here (checked against `f64` in host-tests).
 
 use crate::discretize::{Mat, zoh_delayed};
-use crate::limits::{ConfigError, check_period};
+use crate::limits::{ConfigError, check_finite, check_period, check_range};
 use crate::params;
 use core::f64::consts::PI;
+use core::ops::Bound::{Excluded, Included};
 
 /// The longest delay line, samples (1.28 ms at 50 kHz; 320 us at 200 kHz). Our assumption:
 /// three times the thesis' loop delay at the highest rate, with room for the model-gap
@@ -86,33 +87,28 @@ impl LinearPlant {
     /// Discretise. Refuses non-finite or non-positive parameters, damping outside (0, 10],
     /// modes above the Nyquist rate, and delays longer than the delay line.
     pub fn new(c: &LinearPlantConfig) -> Result<Self, ConfigError> {
-        let vals = [
-            c.gain,
-            c.amp_pole_hz,
-            c.mode_hz,
-            c.damping,
-            c.delay_s,
-            c.period_s,
-        ];
-        if vals.iter().any(|v| !v.is_finite()) {
-            return Err(ConfigError::NotFinite);
+        for (name, v) in [
+            ("gain", c.gain),
+            ("amp_pole_hz", c.amp_pole_hz),
+            ("mode_hz", c.mode_hz),
+            ("damping", c.damping),
+            ("delay_s", c.delay_s),
+        ] {
+            check_finite(name, v)?;
         }
         let t = check_period(c.period_s)?;
         let nyquist = 0.5 / t;
-        if !(c.gain > 0.0
-            && c.gain < 100.0
-            && c.amp_pole_hz > 0.0
-            && c.amp_pole_hz < 10.0 * nyquist
-            && c.mode_hz > 0.0
-            && c.mode_hz < nyquist
-            && c.damping > 0.0
-            && c.damping <= 10.0)
-        {
-            return Err(ConfigError::BadGain);
-        }
-        if !(c.delay_s >= 0.0 && c.delay_s / t < (MAX_DELAY_SAMPLES - 2) as f64) {
-            return Err(ConfigError::BadTimeConstant);
-        }
+        check_range("gain", c.gain, Excluded(0.0), Excluded(100.0))?;
+        check_range(
+            "amp_pole_hz",
+            c.amp_pole_hz,
+            Excluded(0.0),
+            Excluded(10.0 * nyquist),
+        )?;
+        check_range("mode_hz", c.mode_hz, Excluded(0.0), Excluded(nyquist))?;
+        check_range("damping", c.damping, Excluded(0.0), Included(10.0))?;
+        let delay_max = (MAX_DELAY_SAMPLES - 2) as f64 * t;
+        check_range("delay_s", c.delay_s, Included(0.0), Excluded(delay_max))?;
         let (a, b) = continuous_state_space(c);
         let (phi, gn, go, d) = zoh_delayed::<3, 4>(&a, &b, t, c.delay_s);
         let f = |m: [f64; 3]| m.map(|v| v as f32);

@@ -13,15 +13,16 @@
 //!
 //! **Why this form and not the Everett table** ([`crate::hysteresis`]): the model-gap loop fits
 //! the hysteresis from arbitrary records in one linear least-squares solve (the output is
-//! linear in the weights), with four parameters whose meaning is plain, and the state is four
-//! `f32` (so [`crate::stage::StageState`] stays `Copy`). The table is the model for
+//! linear in the weights), with one weight per operator whose meaning is plain (eight,
+//! [`PLAY_OPERATORS`], over the fixed radii [`crate::params::PLAY_RADII_V`]), and the state is
+//! eight `f32` (so [`crate::stage::StageState`] stays `Copy`). The table is the model for
 //! identification from reversal curves and for inversion; a fitted play sum converts to it
 //! exactly (its Everett function is `sum_i w_i max(a - b - 2 r_i, 0)`), which the lead may
 //! choose to do when the stage takes a table.
 //!
-//! Cost: four clamps per step; no allocation, no panics.
+//! Cost: one clamp and one multiply-add per operator (eight) per step; no allocation, no panics.
 
-use crate::limits::ConfigError;
+use crate::limits::{ConfigError, check_within};
 use crate::params::PLAY_OPERATORS;
 
 /// Parameters of the play-operator hysteresis (design time, `f64`).
@@ -36,18 +37,11 @@ pub struct PlayConfig {
 impl PlayConfig {
     /// Finite, thresholds within 0..10 V, weights within -1..1.
     pub fn validate(&self) -> Result<(), ConfigError> {
-        if self
-            .radii_v
-            .iter()
-            .chain(&self.weights)
-            .any(|v| !v.is_finite())
-        {
-            return Err(ConfigError::NotFinite);
+        for r in self.radii_v {
+            check_within("radii_v", r, 0.0, 10.0)?;
         }
-        if self.radii_v.iter().any(|r| !(0.0..=10.0).contains(r))
-            || self.weights.iter().any(|w| w.abs() > 1.0)
-        {
-            return Err(ConfigError::BadGain);
+        for w in self.weights {
+            check_within("weights", w, -1.0, 1.0)?;
         }
         Ok(())
     }

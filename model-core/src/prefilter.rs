@@ -42,20 +42,23 @@
 //!
 //! The integrator of `G_c` becomes a zero at z = 1 and the lag zero (1 rad/s) a pole at
 //! `1 - 2e-5`; the lag pole (0.398 rad/s) a zero at `1 - 8e-6`. A direct form in `f32` would
-//! lose them (the spacing of `f32` near 1 is 6e-8). Every first-order section is therefore
-//! written in delta form,
+//! lose them (the spacing of `f32` near 1 is 6e-8). Every section is therefore one of the
+//! delta-form sections of [`crate::sections`], the family the compensator is built from:
+//! [`FirstOrder`] for `(c1 s + c0)/(d1 s + d0)`,
 //!
 //! ```text
 //! y[n] = y[n-1] + bd (x[n] - x[n-1]) + bs (x[n] + x[n-1]) - alpha y[n-1]
 //! bd = (2 c1/T) / D,  bs = c0 / D,  alpha = 2 d0 / D,  D = 2 d1/T + d0
 //! ```
 //!
-//! for `(c1 s + c0)/(d1 s + d0)`: a zero at z = 1 is `bs = 0` exactly, a zero near 1 is the
-//! ratio of `bd` and `bs`, each to full `f32` precision, and `alpha = 1 - a` is computed
-//! without cancellation; the section whose pole is near z = 1 (`S_hp`) keeps its state in an
-//! [`Accumulator`], the others (poles at `(2 tau - T)/(2 tau + T) = 0.67`) in plain `f32`. The stage-mode section has no
-//! pole or zero near z = 1 (double pole at `(2 tau - T)/(2 tau + T)`, zeros at `|z| = 0.94`)
-//! and runs as an `f32` direct form I biquad.
+//! where a zero at z = 1 is `bs = 0` exactly, a zero near 1 is the ratio of `bd` and `bs`,
+//! each to full `f32` precision, and `alpha = 1 - a` is computed without cancellation. The
+//! section whose pole is near z = 1 (`S_hp`) keeps its output in an [`Accumulator`], the others
+//! (poles at `(2 tau - T)/(2 tau + T) = 0.67`) in plain `f32`. The stage-mode section,
+//! `S_mode`, is a [`SecondOrder`] section (the same form one order up) on plain `f32`: it has no
+//! pole or zero near z = 1 (double pole at `(2 tau - T)/(2 tau + T)`, zeros at `|z| = 0.94`), so
+//! the form buys it little (1.6e-7 of its peak against 8e-7 for an `f32` direct form I, for 11
+//! instructions more per step), but one form serves every section.
 //!
 //! # The delay: decided and measured
 //! `exp(+Td s)` in the inverse is an advance: not causal. Alternatives ([`DelayHandling`]),
@@ -139,22 +142,24 @@
 //! ```text
 //! 6 V p-p around 4 V     feedback alone      planning only       full pre-filter     cut
 //!                        rms      peak       rms      peak       rms      peak
-//! sine      10 Hz       42.4     61.0 mV    42.4     60.9 mV     0.29     1.16 mV   147x
-//! sine     100 Hz      425.4    602.5      424.9    601.6        4.25     6.79      100x
-//! sine     300 Hz     1305.0   1845.9     1290.8   1826.2       37.8     54.1        34x
+//! sine      10 Hz       42.4     61.0 mV    42.4     61.0 mV     0.29     1.14 mV   148x
+//! sine     100 Hz      425.4    602.5      424.9    601.5        4.25     6.83      100x
+//! sine     300 Hz     1305.0   1845.9     1290.8   1826.2       37.8     54.2        34x
 //! triangle  10 Hz       38.1     45.6      38.1     44.6         0.45    10.0        85x
-//! triangle 100 Hz      377.4    448.5     375.5    436.2        11.3     94.6        34x
-//! triangle 300 Hz     1105.1   1343.0    1087.8   1305.8        58.2    282.5        19x
+//! triangle 100 Hz      377.4    448.5     375.5    436.2        11.3     94.7        34x
+//! triangle 300 Hz     1105.1   1343.0    1087.8   1305.8        58.2    282.6        19x
 //! ```
 //! No sample clamped by the window or held by the slew limit; the largest command slew is
 //! 7.1 V/ms (300 Hz sine) against the 150 V/ms limit. Steps (20 Hz square wave): overshoot
 //! 0.11 % for 1 V steps and 0.04 % for 6 V steps with the pre-filter, 7.9 % without.
 //!
 //! # Cost
-//! Per sample: 8 first-order sections (one with a compensated sum), one biquad, one delay-line
-//! read with interpolation: about 30 multiply-adds, a dependent chain through 8 sections.
+//! Per sample: 8 first-order sections (one with a compensated sum), one second-order section,
+//! one delay-line read with interpolation: about 30 multiplies and 60 additions, a dependent
+//! chain through 8 sections.
 //! Host (criterion, `benches/prefilter.rs`, a shared 2-core machine, so noisy): 45-55 ns per
-//! step; the sine generator 6-11 ns. Cycles on the Cortex-M7 are still to be measured.
+//! step; the sine generator 6-11 ns. On the Cortex-M (`piezo qemu bench`, QEMU counts
+//! instructions, not cycles): 170 instructions per step.
 //!
 //! # Example
 //! ```
@@ -170,11 +175,12 @@
 //! ```
 
 use crate::lag::{LagCompensator, LagConfig};
-use crate::limits::{ConfigError, check_period};
+use crate::limits::{ConfigError, Reason, check_period, check_within};
 use crate::params;
 use crate::plant::{LinearPlant, LinearPlantConfig};
-use crate::sections::Accumulator;
+use crate::sections::{Accumulator, FirstOrder, FirstOrderState, SecondOrder, SecondOrderState};
 use core::f64::consts::PI;
+use core::ops::Bound::{Excluded, Included};
 
 /// Length of the direct branch's delay line, samples.
 const LINE: usize = 64;
@@ -225,136 +231,6 @@ impl Default for PreFilterConfig {
     }
 }
 
-/// A first-order section `(c1 s + c0)/(d1 s + d0)` after Tustin, in delta form.
-#[derive(Clone, Copy, Debug, PartialEq)]
-struct Section1 {
-    bd: f32,
-    bs: f32,
-    alpha: f32,
-}
-
-/// History of a [`Section1`] whose pole is far from z = 1: plain `f32`.
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
-struct State1 {
-    x: f32,
-    y: f32,
-}
-
-/// History of a [`Section1`] whose pole is near z = 1: compensated sum.
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
-struct State1Acc {
-    x: f32,
-    y: Accumulator,
-}
-
-impl Section1 {
-    fn tustin(c1: f64, c0: f64, d1: f64, d0: f64, t: f64) -> Self {
-        let k = 2.0 / t;
-        let den = k * d1 + d0;
-        Self {
-            bd: (k * c1 / den) as f32,
-            bs: (c0 / den) as f32,
-            alpha: (2.0 * d0 / den) as f32,
-        }
-    }
-
-    /// DC gain `c0/d0` from the coefficients (`2 bs / alpha`), used to settle states.
-    fn dc_gain(&self) -> f32 {
-        if self.alpha == 0.0 {
-            0.0
-        } else {
-            2.0 * self.bs / self.alpha
-        }
-    }
-
-    #[inline]
-    fn step(&self, s: &mut State1, x: f32) -> f32 {
-        s.y += self.bd * (x - s.x) + self.bs * (x + s.x) - self.alpha * s.y;
-        s.x = x;
-        s.y
-    }
-
-    #[inline]
-    fn step_acc(&self, s: &mut State1Acc, x: f32) -> f32 {
-        let y = s.y.value();
-        s.y.add(self.bd * (x - s.x) + self.bs * (x + s.x) - self.alpha * y);
-        s.x = x;
-        s.y.value()
-    }
-
-    fn settle(&self, x: f32) -> State1 {
-        State1 {
-            x,
-            y: self.dc_gain() * x,
-        }
-    }
-
-    fn settle_acc(&self, x: f32) -> State1Acc {
-        State1Acc {
-            x,
-            y: Accumulator::new(self.dc_gain() * x),
-        }
-    }
-}
-
-/// A second-order section after Tustin, `f32` direct form I: `y = b0 x + b1 x1 + b2 x2 - a1 y1 - a2 y2`.
-#[derive(Clone, Copy, Debug, PartialEq)]
-struct Section2 {
-    b: [f32; 3],
-    a: [f32; 2],
-}
-
-/// History of a [`Section2`].
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
-struct State2 {
-    x: [f32; 2],
-    y: [f32; 2],
-}
-
-impl Section2 {
-    /// `(c[0] s^2 + c[1] s + c[2]) / (d[0] s^2 + d[1] s + d[2])`.
-    fn tustin(c: [f64; 3], d: [f64; 3], t: f64) -> Self {
-        let k = 2.0 / t;
-        let bil = |p: [f64; 3]| {
-            let [p2, p1, p0] = p;
-            [
-                p2 * k * k + p1 * k + p0,
-                2.0 * (p0 - p2 * k * k),
-                p2 * k * k - p1 * k + p0,
-            ]
-        };
-        let n = bil(c);
-        let m = bil(d);
-        Self {
-            b: [
-                (n[0] / m[0]) as f32,
-                (n[1] / m[0]) as f32,
-                (n[2] / m[0]) as f32,
-            ],
-            a: [(m[1] / m[0]) as f32, (m[2] / m[0]) as f32],
-        }
-    }
-
-    #[inline]
-    fn step(&self, s: &mut State2, x: f32) -> f32 {
-        let y = self.b[0] * x + self.b[1] * s.x[0] + self.b[2] * s.x[1]
-            - self.a[0] * s.y[0]
-            - self.a[1] * s.y[1];
-        s.x = [x, s.x[0]];
-        s.y = [y, s.y[0]];
-        y
-    }
-
-    fn settle(&self, x: f32) -> State2 {
-        let a_sum = 1.0 + self.a[0] + self.a[1];
-        let g = (self.b[0] + self.b[1] + self.b[2]) / a_sum;
-        State2 {
-            x: [x; 2],
-            y: [g * x; 2],
-        }
-    }
-}
-
 /// The discrete pre-filter: configuration half (`Copy`, built outside the interrupt).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct PreFilter {
@@ -362,34 +238,35 @@ pub struct PreFilter {
     preview: u32,
     /// Fraction of a sample the input is delayed by (`K - lag`), in `[0, 1)`.
     in_frac: f32,
-    plan: Section1,
+    plan: FirstOrder,
     direct_whole: usize,
     direct_frac: f32,
-    hp: Section1,
-    lag: Section1,
-    amp: Section1,
-    stage: Section2,
+    hp: FirstOrder,
+    lag: FirstOrder,
+    amp: FirstOrder,
+    stage: SecondOrder,
 }
 
 /// The pre-filter's history: the state half.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct PreFilterState {
     r_prev: f32,
-    plan: [State1; 4],
+    plan: [FirstOrderState; 4],
     line: [f32; LINE],
     head: usize,
-    hp: State1Acc,
-    lag: State1,
-    amp: State1,
-    stage: State2,
+    hp: FirstOrderState<Accumulator>,
+    lag: FirstOrderState,
+    amp: FirstOrderState,
+    stage: SecondOrderState,
     last: f32,
 }
 
 impl PreFilter {
     /// Derive the pre-filter of the loop made of `lag` and `plant` (which must share their
     /// sample period). Refuses what [`LagCompensator::new`] or [`LinearPlant::new`] refuse,
-    /// different periods ([`ConfigError::BadRate`]), a non-finite tau, and tau outside
-    /// `params::PREFILTER_TAU_MIN_S..=PREFILTER_TAU_MAX_S` ([`ConfigError::BadTimeConstant`]).
+    /// different periods (`"plant.period_s"`, [`Reason::Mismatch`]), a non-finite tau, and tau
+    /// outside `params::PREFILTER_TAU_MIN_S..=PREFILTER_TAU_MAX_S` or too long for the
+    /// preview (`"tau_s"`, [`Reason::OutOfRange`]).
     ///
     /// ```
     /// use model_core::lag::LagConfig;
@@ -410,15 +287,17 @@ impl PreFilter {
         LinearPlant::new(plant)?;
         let t = check_period(lag.period_s)?;
         if (plant.period_s - t).abs() > 1e-9 * t {
-            return Err(ConfigError::BadRate);
+            return Err(ConfigError::new(
+                "plant.period_s",
+                Reason::Mismatch("lag.period_s"),
+            ));
         }
-        let tau = config.tau_s;
-        if !tau.is_finite() {
-            return Err(ConfigError::NotFinite);
-        }
-        if !(params::PREFILTER_TAU_MIN_S..=params::PREFILTER_TAU_MAX_S).contains(&tau) {
-            return Err(ConfigError::BadTimeConstant);
-        }
+        let tau = check_within(
+            "tau_s",
+            config.tau_s,
+            params::PREFILTER_TAU_MIN_S,
+            params::PREFILTER_TAU_MAX_S,
+        )?;
         let delay_s = match (config.mode, config.delay) {
             (PreFilterMode::Full, DelayHandling::Preview) => plant.delay_s,
             (PreFilterMode::Full, DelayHandling::PreviewWithHold) => plant.delay_s + 0.5 * t,
@@ -431,12 +310,24 @@ impl PreFilter {
         // Bounded: tau <= 1 ms and the plant's delay < 62 samples keep this far below u32.
         let preview = libm_ceil(lag_samples - 1e-9);
         if preview > params::MAX_PREVIEW_SAMPLES as f64 {
-            return Err(ConfigError::BadTimeConstant);
+            // The preview would be longer than a generator offers: the longest tau that fits.
+            let tau_max = (params::MAX_PREVIEW_SAMPLES as f64 * t - delay_s) / 4.0;
+            return Err(ConfigError::outside(
+                "tau_s",
+                params::PREFILTER_TAU_MIN_S,
+                tau_max,
+            ));
         }
         let direct = delay_s / t;
         let direct_whole = (direct + 1e-9) as usize;
         if direct_whole + 1 >= LINE {
-            return Err(ConfigError::BadTimeConstant);
+            // The direct branch's delay line is too short: the longest delay it holds.
+            let delay_max = (LINE - 1) as f64 * t - (delay_s - plant.delay_s);
+            return Err(ConfigError::out_of_range(
+                "plant.delay_s",
+                Included(0.0),
+                Excluded(delay_max),
+            ));
         }
         let we = 2.0 * PI * plant.amp_pole_hz;
         let wn = 2.0 * PI * plant.mode_hz;
@@ -445,13 +336,13 @@ impl PreFilter {
             mode: config.mode,
             preview: preview as u32,
             in_frac: (preview - lag_samples).clamp(0.0, 1.0) as f32,
-            plan: Section1::tustin(0.0, 1.0, tau, 1.0, t),
+            plan: FirstOrder::tustin([0.0, 1.0], [tau, 1.0], t),
             direct_whole,
             direct_frac: (direct - direct_whole as f64).clamp(0.0, 1.0) as f32,
-            hp: Section1::tustin(1.0, 0.0, 1.0, lag.zero_rad_s, t),
-            lag: Section1::tustin(1.0 / (lag.pole_rad_s * kck), 1.0 / kck, tau, 1.0, t),
-            amp: Section1::tustin(1.0 / we, 1.0, tau, 1.0, t),
-            stage: Section2::tustin(
+            hp: FirstOrder::tustin([1.0, 0.0], [1.0, lag.zero_rad_s], t),
+            lag: FirstOrder::tustin([1.0 / (lag.pole_rad_s * kck), 1.0 / kck], [tau, 1.0], t),
+            amp: FirstOrder::tustin([1.0 / we, 1.0], [tau, 1.0], t),
+            stage: SecondOrder::tustin(
                 [1.0 / (wn * wn), 2.0 * plant.damping / wn, 1.0],
                 [tau * tau, 2.0 * tau, 1.0],
                 t,
@@ -474,16 +365,16 @@ impl PreFilter {
     /// A state at rest with a constant reference `r_v` for ever (output `r_v`).
     pub fn settled_state(&self, r_v: f32) -> PreFilterState {
         let r = if r_v.is_finite() { r_v } else { 0.0 };
-        let p = self.plan.settle(r);
+        let p = self.plan.settled(r);
         PreFilterState {
             r_prev: r,
             plan: [p; 4],
             line: [r; LINE],
             head: 0,
-            hp: self.hp.settle_acc(r),
-            lag: self.lag.settle(0.0),
-            amp: self.amp.settle(0.0),
-            stage: self.stage.settle(0.0),
+            hp: self.hp.settled(r),
+            lag: self.lag.settled(0.0),
+            amp: self.amp.settled(0.0),
+            stage: self.stage.settled(0.0),
             last: r,
         }
     }
@@ -515,7 +406,7 @@ impl PreFilter {
             let a = s.line[(s.head + LINE - self.direct_whole) % LINE];
             let b = s.line[(s.head + LINE - self.direct_whole - 1) % LINE];
             let direct = a + self.direct_frac * (b - a);
-            let h = self.hp.step_acc(&mut s.hp, x);
+            let h = self.hp.step(&mut s.hp, x);
             let g = self.lag.step(&mut s.lag, h);
             let e = self.amp.step(&mut s.amp, g);
             direct + self.stage.step(&mut s.stage, e)
@@ -588,7 +479,10 @@ mod tests {
         let c = PreFilterConfig::default();
         assert_eq!(
             PreFilter::new(&lag, &other_rate, &c),
-            Err(ConfigError::BadRate)
+            Err(ConfigError::new(
+                "plant.period_s",
+                Reason::Mismatch("lag.period_s")
+            ))
         );
     }
 }

@@ -40,9 +40,10 @@
 //! assert!((g.next(&mut s) - 7.0).abs() < 1e-5); // the peak, a quarter period ahead
 //! ```
 
-use crate::limits::{ConfigError, check_period};
+use crate::limits::{ConfigError, check_finite, check_period, check_range, check_within};
 use crate::params;
 use core::f64::consts::PI;
+use core::ops::Bound::{Excluded, Included, Unbounded};
 
 /// The shape of a reference.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -165,15 +166,19 @@ impl ReferenceGenerator {
     /// assert!(ReferenceGenerator::new(&fast, 0).is_err()); // above Nyquist
     /// ```
     pub fn new(c: &ReferenceConfig, preview: u32) -> Result<Self, ConfigError> {
-        if !(c.offset_v.is_finite() && c.amplitude_v.is_finite() && c.freq_hz.is_finite()) {
-            return Err(ConfigError::NotFinite);
-        }
+        check_finite("offset_v", c.offset_v)?;
+        check_finite("amplitude_v", c.amplitude_v)?;
+        check_finite("freq_hz", c.freq_hz)?;
         let t = check_period(c.period_s)?;
         let nyquist = 0.5 / t;
-        let f_ok = |f: f64| (0.0..nyquist).contains(&f);
-        if !f_ok(c.freq_hz) || preview > params::MAX_PREVIEW_SAMPLES {
-            return Err(ConfigError::BadGain);
-        }
+        let check_freq = |name, f| check_range(name, f, Included(0.0), Excluded(nyquist));
+        check_freq("freq_hz", c.freq_hz)?;
+        check_within(
+            "preview",
+            preview as f64,
+            0.0,
+            params::MAX_PREVIEW_SAMPLES as f64,
+        )?;
         let mut g = Self {
             kind: Kind::Sine,
             offset: c.offset_v as f32,
@@ -191,37 +196,37 @@ impl ReferenceGenerator {
             Shape::Triangle => g.kind = Kind::Triangle,
             Shape::Square => g.kind = Kind::Square,
             Shape::Step { at_s } => {
-                if !at_s.is_finite() {
-                    return Err(ConfigError::NotFinite);
-                }
-                if !(at_s >= 0.0 && at_s / t < 1e18) {
-                    return Err(ConfigError::BadTimeConstant);
-                }
+                check_range("at_s", at_s, Included(0.0), Excluded(1e18 * t))?;
                 g.kind = Kind::Step;
                 g.step_at = (at_s / t + 0.5) as u64;
             }
             Shape::Ramp { rate_v_per_s } => {
-                if !rate_v_per_s.is_finite() {
-                    return Err(ConfigError::NotFinite);
-                }
+                check_finite("rate_v_per_s", rate_v_per_s)?;
                 let per_sample = rate_v_per_s * t;
                 if !(per_sample > 0.0 && c.amplitude_v.abs() / per_sample < 1e15) {
-                    return Err(ConfigError::BadGain);
+                    // At most 1e15 samples of ramp.
+                    let min = c.amplitude_v.abs() / (1e15 * t);
+                    return Err(ConfigError::out_of_range(
+                        "rate_v_per_s",
+                        Excluded(min),
+                        Unbounded,
+                    ));
                 }
                 g.kind = Kind::Ramp;
                 g.ramp_per_sample = (per_sample * c.amplitude_v.signum()) as f32;
                 g.ramp_len = (c.amplitude_v.abs() / per_sample) as u64;
             }
             Shape::Sweep { end_hz, duration_s } => {
-                if !(end_hz.is_finite() && duration_s.is_finite()) {
-                    return Err(ConfigError::NotFinite);
-                }
-                if !f_ok(end_hz) {
-                    return Err(ConfigError::BadGain);
-                }
+                check_finite("end_hz", end_hz)?;
+                check_finite("duration_s", duration_s)?;
+                check_freq("end_hz", end_hz)?;
                 let len = duration_s / t;
                 if !(1.0..1e15).contains(&len) {
-                    return Err(ConfigError::BadTimeConstant);
+                    return Err(ConfigError::out_of_range(
+                        "duration_s",
+                        Included(t),
+                        Excluded(1e15 * t),
+                    ));
                 }
                 g.kind = Kind::Sweep;
                 g.sweep_len = len as u64;

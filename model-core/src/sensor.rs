@@ -19,7 +19,7 @@
 //! through [`crate::codes::DacCode`].
 
 use crate::codes::AdcCode;
-use crate::limits::ConfigError;
+use crate::limits::{ConfigError, check_within};
 use crate::params;
 
 /// Sensor parameters (design time).
@@ -107,12 +107,8 @@ impl Sensor {
     /// assert!((y - 1.0).abs() <= 0.5 * model_core::AdcCode::VOLT_PER_LSB);
     /// ```
     pub fn new(cfg: &SensorConfig) -> Result<Self, ConfigError> {
-        if !(cfg.gain.is_finite() && cfg.noise_v.is_finite()) {
-            return Err(ConfigError::NotFinite);
-        }
-        if !(cfg.gain >= 0.1 && cfg.gain <= 10.0 && cfg.noise_v >= 0.0 && cfg.noise_v <= 1.0) {
-            return Err(ConfigError::BadGain);
-        }
+        check_within("gain", cfg.gain, 0.1, 10.0)?;
+        check_within("noise_v", cfg.noise_v, 0.0, 1.0)?;
         Ok(Self {
             gain: cfg.gain as f32,
             noise_v: cfg.noise_v as f32,

@@ -69,7 +69,7 @@ use crate::drift::{Drift, DriftConfig, DriftState};
 use crate::gain::{FastGain, FastGainConfig};
 use crate::hysteresis::{HysteresisMemory, HysteresisTable};
 use crate::limits::clamp_f32;
-use crate::limits::{ConfigError, check_period};
+use crate::limits::{ConfigError, check_finite, check_period, check_range};
 use crate::params;
 use crate::plant::{
     LinearPlant, LinearPlantConfig, MAX_DELAY_SAMPLES, PlantState, continuous_state_space,
@@ -77,6 +77,7 @@ use crate::plant::{
 use crate::play::{Play, PlayConfig, PlayState};
 use crate::sensor::{Sensor, SensorConfig, SensorState};
 use core::f64::consts::PI;
+use core::ops::Bound::{Excluded, Included};
 
 /// A second-order mode `wn^2 / (s^2 + 2 zeta wn s + wn^2)` (unity static gain).
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -206,16 +207,20 @@ struct TwoModesState {
 impl TwoModes {
     fn new(p: &LinearPlantConfig, m: &ModeConfig) -> Result<Self, ConfigError> {
         // The 3-state part is checked by LinearPlant::new (called by Stage::new first).
-        if !(m.mode_hz.is_finite() && m.damping.is_finite()) {
-            return Err(ConfigError::NotFinite);
-        }
-        if !(m.mode_hz > 0.0
-            && m.mode_hz < 0.5 / p.period_s
-            && m.damping > 0.0
-            && m.damping <= 10.0)
-        {
-            return Err(ConfigError::BadGain);
-        }
+        check_finite("second_mode.mode_hz", m.mode_hz)?;
+        check_finite("second_mode.damping", m.damping)?;
+        check_range(
+            "second_mode.mode_hz",
+            m.mode_hz,
+            Excluded(0.0),
+            Excluded(0.5 / p.period_s),
+        )?;
+        check_range(
+            "second_mode.damping",
+            m.damping,
+            Excluded(0.0),
+            Included(10.0),
+        )?;
         let (a3, b3) = continuous_state_space(p);
         let w2 = 2.0 * PI * m.mode_hz;
         let mut a = [[0.0; 5]; 5];
@@ -355,15 +360,20 @@ impl Stage {
     /// ```
     pub fn new(cfg: &StageConfig) -> Result<Self, ConfigError> {
         let t = check_period(cfg.period_s)?;
-        if !cfg.static_gain.is_finite() || !cfg.delay_s.is_finite() {
-            return Err(ConfigError::NotFinite);
-        }
-        if !(cfg.static_gain > 0.05 && cfg.static_gain < 20.0) {
-            return Err(ConfigError::BadGain);
-        }
-        if !(cfg.delay_s >= 0.0 && cfg.delay_s <= params::MAX_DELAY_S) {
-            return Err(ConfigError::BadTimeConstant);
-        }
+        check_finite("static_gain", cfg.static_gain)?;
+        check_finite("delay_s", cfg.delay_s)?;
+        check_range(
+            "static_gain",
+            cfg.static_gain,
+            Excluded(0.05),
+            Excluded(20.0),
+        )?;
+        check_range(
+            "delay_s",
+            cfg.delay_s,
+            Included(0.0),
+            Included(params::MAX_DELAY_S),
+        )?;
         Ok(Self {
             dac: cfg.dac,
             amplifier: Amplifier::new(&cfg.amplifier, t)?,
@@ -571,11 +581,10 @@ impl Feedforward {
     /// A feedforward inverting the static map and drift of `stage`, with commands kept in
     /// `[lo_v, hi_v]` (for example the safe window 0..10 V).
     pub fn new(stage: &Stage, lo_v: f32, hi_v: f32) -> Result<Self, ConfigError> {
-        if !(lo_v.is_finite() && hi_v.is_finite()) {
-            return Err(ConfigError::NotFinite);
-        }
+        check_finite("lo_v", lo_v as f64)?;
+        check_finite("hi_v", hi_v as f64)?;
         if lo_v >= hi_v {
-            return Err(ConfigError::BadWindow);
+            return Err(ConfigError::not_below("lo_v", "hi_v"));
         }
         Ok(Self {
             stage: *stage,

@@ -14,8 +14,8 @@ use core::sync::atomic::Ordering;
 use cortex_m::peripheral::DWT;
 use critical_section::Mutex;
 use embassy_stm32::interrupt;
+use firmware::design_parameters;
 use firmware::sample::LoopCore;
-use model_core::params;
 
 use super::adc;
 use super::dac::Dac;
@@ -24,7 +24,7 @@ use super::shared::{LINKS, STATUS};
 /// Everything the interrupt owns.
 pub struct LoopContext {
     /// Configuration, controller state, timing, capture.
-    pub core: LoopCore<{ params::FW_CAPTURE_RECORDS }>,
+    pub core: LoopCore<{ design_parameters::CAPTURE_RECORDS }>,
     /// The DAC.
     pub dac: Dac,
 }

@@ -31,7 +31,7 @@ mod external {
     use embassy_stm32::peripherals::{PA5, PB5, PD14, SPI1};
     use embassy_stm32::spi::{self, Spi};
     use embassy_stm32::time::Hertz;
-    use model_core::params;
+    use firmware::design_parameters;
 
     /// The external DAC: SPI1 registers plus the SYNC pin.
     pub struct Dac {
@@ -49,7 +49,7 @@ mod external {
         ) -> Self {
             let mut cfg = spi::Config::default();
             cfg.mode = spi::MODE_1;
-            cfg.frequency = Hertz(params::FW_DAC_SPI_HZ);
+            cfg.frequency = Hertz(design_parameters::DAC_SPI_HZ);
             cfg.nss_output_disable = true;
             let driver = Spi::new_blocking_txonly(spi, sck, mosi, cfg);
             // The driver's Drop would disable SPI1: keep it configured forever; from here on

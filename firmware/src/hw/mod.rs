@@ -29,10 +29,11 @@ use embassy_stm32::usart::{self, BufferedUart};
 use embassy_stm32::wdg::IndependentWatchdog;
 use embassy_stm32::{bind_interrupts, interrupt, pac, peripherals};
 use embassy_time::Timer;
+use firmware::design_parameters;
 use firmware::sample::LoopCore;
 use firmware::scaling::TimerSetting;
 use firmware::stats::CycleStats;
-use model_core::{DacCode, params};
+use model_core::DacCode;
 use panic_probe as _;
 use static_cell::StaticCell;
 
@@ -117,7 +118,7 @@ async fn main(spawner: Spawner) {
     // Before the driver enables the interrupt (its NVIC default would be P0, the highest).
     interrupt::USART3.set_priority(board::PRIO_UART);
     let mut ucfg = usart::Config::default();
-    ucfg.baudrate = params::FW_UART_BAUD;
+    ucfg.baudrate = design_parameters::UART_BAUD;
     let uart = match BufferedUart::new(
         p.USART3,
         p.PD9,
@@ -135,7 +136,7 @@ async fn main(spawner: Spawner) {
     output_enable.set_high();
     core::mem::forget(output_enable); // stays high; the reset state (input, pulled down) opens it
 
-    let iwdg = IndependentWatchdog::new(p.IWDG1, (params::FW_IWDG_TIMEOUT_S * 1e6) as u32);
+    let iwdg = IndependentWatchdog::new(p.IWDG1, (design_parameters::IWDG_TIMEOUT_S * 1e6) as u32);
     let led = Output::new(p.PB0, Level::Low, Speed::Low);
     let fault_led = Output::new(p.PB14, Level::Low, Speed::Low);
     defmt::info!("loop running at {} Hz", setting.rate_hz);

@@ -5,12 +5,12 @@
 use core::sync::atomic::AtomicU32;
 
 use firmware::capture::CaptureBuffer;
+use firmware::design_parameters;
 use firmware::liveness::Liveness;
 use firmware::mailbox::Mailbox;
 use firmware::sample::{Links, Requests, Status};
 use firmware::settings::LoopConfig;
 use firmware::stats::SharedStats;
-use model_core::params;
 
 /// New loop configurations (controller, reference, ADC correction), built by the command task.
 pub static CONFIG: Mailbox<LoopConfig> = Mailbox::new();
@@ -23,7 +23,7 @@ pub static LIVENESS: Liveness = Liveness::new();
 /// The interrupt's published status.
 pub static STATUS: Status = Status::new();
 /// The capture buffer (400 kB, in AXI SRAM: all of RAM is AXI SRAM in `memory.x`).
-pub static CAPTURE: CaptureBuffer<{ params::FW_CAPTURE_RECORDS }> = CaptureBuffer::new();
+pub static CAPTURE: CaptureBuffer<{ design_parameters::CAPTURE_RECORDS }> = CaptureBuffer::new();
 /// Cycle budget of one sample (the period in CPU cycles minus the conversion time).
 pub static BUDGET_CYCLES: AtomicU32 = AtomicU32::new(u32::MAX);
 /// Samples without a task check-in before the interrupt raises the watchdog fault.

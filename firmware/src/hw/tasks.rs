@@ -11,6 +11,7 @@ use embassy_time::{Duration, Ticker, Timer, with_timeout};
 use embedded_io_async::{Read, Write};
 use firmware::capture::CaptureState;
 use firmware::command::{self, CaptureRequest, Command, ModeRequest};
+use firmware::design_parameters;
 use firmware::liveness::{TASK_COMMAND, TASK_HEARTBEAT, Verdict};
 use firmware::scaling::{self, TimerSetting};
 use heapless::String;
@@ -45,7 +46,7 @@ pub fn apply_rate_limits(rate_hz: f64) {
         Ordering::Relaxed,
     );
     STALL_SAMPLES.store(
-        (params::FW_TASK_STALL_S * rate_hz) as u32,
+        (design_parameters::TASK_STALL_S * rate_hz) as u32,
         Ordering::Relaxed,
     );
 }
@@ -114,7 +115,7 @@ fn commit(settings: &mut Settings, candidate: Settings, out: &mut Reply) -> bool
 fn handle(
     cmd: Command,
     settings: &mut Settings,
-    capture: &mut firmware::capture::Consumer<{ params::FW_CAPTURE_RECORDS }>,
+    capture: &mut firmware::capture::Consumer<{ design_parameters::CAPTURE_RECORDS }>,
     out: &mut Reply,
 ) -> Option<(u32, u32)> {
     match cmd {
@@ -226,12 +227,12 @@ fn handle(
         Command::Capture(CaptureRequest::Arm { duration_s }) => {
             // Rounded to the nearest sample; `as` saturates, and the parser refused NaN.
             let n = (duration_s * settings.rate_hz + 0.5) as u64;
-            if !(1..=params::FW_CAPTURE_RECORDS as u64).contains(&n) {
+            if !(1..=design_parameters::CAPTURE_RECORDS as u64).contains(&n) {
                 let _ = write!(
                     out,
                     "err capture holds at most {} samples ({:.3} s at this rate)",
-                    params::FW_CAPTURE_RECORDS,
-                    params::FW_CAPTURE_RECORDS as f64 / settings.rate_hz
+                    design_parameters::CAPTURE_RECORDS,
+                    design_parameters::CAPTURE_RECORDS as f64 / settings.rate_hz
                 );
             } else {
                 let n = n as u32;
@@ -277,7 +278,7 @@ fn handle(
 /// Sends records `first .. first + count` as frames.
 async fn send_capture(
     tx: &mut BufferedUart<'static>,
-    capture: &firmware::capture::Consumer<{ params::FW_CAPTURE_RECORDS }>,
+    capture: &firmware::capture::Consumer<{ design_parameters::CAPTURE_RECORDS }>,
     rate_hz: f64,
     first: u32,
     count: u32,
@@ -336,7 +337,7 @@ async fn send_capture(
 pub async fn command_task(
     mut uart: BufferedUart<'static>,
     mut settings: Settings,
-    mut capture: firmware::capture::Consumer<{ params::FW_CAPTURE_RECORDS }>,
+    mut capture: firmware::capture::Consumer<{ design_parameters::CAPTURE_RECORDS }>,
 ) {
     let mut line = [0u8; command::MAX_LINE];
     let mut len = 0usize;
@@ -395,7 +396,7 @@ pub async fn command_task(
 /// Blinks the green LED; lights the red one while a fault is latched.
 #[embassy_executor::task]
 pub async fn heartbeat_task(mut led: Output<'static>, mut fault_led: Output<'static>) {
-    let half = Duration::from_micros((params::FW_HEARTBEAT_HALF_PERIOD_S * 1e6) as u64);
+    let half = Duration::from_micros((design_parameters::HEARTBEAT_HALF_PERIOD_S * 1e6) as u64);
     loop {
         led.toggle();
         if STATUS.faults.load(Ordering::Relaxed) != 0 {
@@ -413,7 +414,7 @@ pub async fn heartbeat_task(mut led: Output<'static>, mut fault_led: Output<'sta
 pub async fn supervisor_task(
     mut iwdg: IndependentWatchdog<'static, embassy_stm32::peripherals::IWDG1>,
 ) {
-    let period = Duration::from_micros((params::FW_SUPERVISOR_PERIOD_S * 1e6) as u64);
+    let period = Duration::from_micros((design_parameters::SUPERVISOR_PERIOD_S * 1e6) as u64);
     let mut ticker = Ticker::every(period);
     let mut last = 0u32;
     iwdg.unleash();
@@ -422,7 +423,7 @@ pub async fn supervisor_task(
         // advance is half a period's worth at the slowest allowed rate.
         let stall = STALL_SAMPLES.load(Ordering::Relaxed);
         let min_advance =
-            (params::FW_SUPERVISOR_PERIOD_S * params::MIN_SAMPLE_RATE_HZ / 2.0) as u32;
+            (design_parameters::SUPERVISOR_PERIOD_S * params::MIN_SAMPLE_RATE_HZ / 2.0) as u32;
         match LIVENESS.supervise(&mut last, min_advance, stall) {
             Verdict::Feed => iwdg.pet(),
             Verdict::IsrStalled { advanced } => {

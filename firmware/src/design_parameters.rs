@@ -1,0 +1,63 @@
+//! The board's numbers, in one module (Stabilizer's `design_parameters.rs`): resistor
+//! values, link and SPI rates, watchdog and supervisor timing, capture size and the limits the
+//! command language enforces. Each says where it comes from; most are our assumptions for
+//! the NUCLEO-H743ZI2 build (issue #5). The control loop's own numbers, from the thesis,
+//! stay in `model_core::params`.
+
+// ----- Capture and the command link. -----
+/// Records the firmware's capture buffer holds: 1 s at 50 kHz. At 8 bytes a record
+/// (`model_core::frame::RECORD_LEN`) that is 400 kB of the H743's 512 KiB AXI SRAM (our
+/// assumption).
+pub const CAPTURE_RECORDS: usize = 50_000;
+/// Baud rate of the command and capture link over the ST-LINK virtual COM port (USART3);
+/// the ST-LINK V3 bridges it to USB (our assumption).
+pub const UART_BAUD: u32 = 921_600;
+
+// ----- What a command may ask for. -----
+/// Highest frequency of an on-board sine or triangle reference, Hz: twice the closed-loop
+/// bandwidth of about 1 kHz (model card); our assumption.
+pub const REF_MAX_FREQ_HZ: f64 = 2_000.0;
+/// Lowest frequency of an on-board sine or triangle reference, Hz (our assumption).
+pub const REF_MIN_FREQ_HZ: f64 = 0.001;
+/// Lowest sensor monitor voltage a reference may ask for, volts (E-509 range 0..10 V, sec. 2.4).
+pub const REF_MIN_V: f64 = 0.0;
+/// Highest sensor monitor voltage a reference may ask for, volts (10 V = 12 um, sec. 2.4).
+pub const REF_MAX_V: f64 = 10.0;
+/// Shortest pre-filter time constant a command may set, seconds (our assumption).
+pub const TAU_MIN_S: f64 = 1.0e-6;
+/// Longest pre-filter time constant a command may set, seconds (our assumption).
+pub const TAU_MAX_S: f64 = 0.1;
+
+// ----- Watchdog, supervisor, heartbeat. -----
+/// Independent watchdog (IWDG) timeout, seconds: the chip resets if the interrupt or the
+/// tasks stop for this long (our assumption).
+pub const IWDG_TIMEOUT_S: f64 = 0.1;
+/// How often the supervisor task checks liveness and may feed the IWDG, seconds.
+pub const SUPERVISOR_PERIOD_S: f64 = 0.01;
+/// The interrupt raises the watchdog fault (and ramps to safe) when the tasks have not
+/// checked in for this long, seconds: well before the IWDG bites (our assumption).
+pub const TASK_STALL_S: f64 = 0.05;
+/// Heartbeat LED half period, seconds.
+pub const HEARTBEAT_HALF_PERIOD_S: f64 = 0.25;
+
+// ----- External DAC. -----
+/// SPI clock of the external DAC, Hz (DAC8311 allows 50 MHz, AD5641 30 MHz; our choice leaves
+/// margin for wiring): a 16-bit frame takes 1.3 us.
+pub const DAC_SPI_HZ: u32 = 12_500_000;
+
+// ----- ADC front end (our design; see the firmware README). -----
+/// ADC front end (firmware README): series resistor from the sensor monitor to the buffer
+/// input, ohms (our design).
+pub const ADC_R_IN_OHM: f64 = 100.0e3;
+/// ADC front end: resistor from VREF+ to the buffer input, ohms (E96; our design).
+pub const ADC_R_REF_OHM: f64 = 32.4e3;
+/// ADC front end: resistor from the buffer input to ground, ohms (E96; our design).
+pub const ADC_R_GND_OHM: f64 = 48.7e3;
+/// VREF+ of the NUCLEO-H743ZI2 (tied to VDDA, 3.3 V; UM2407).
+pub const ADC_VREF_V: f64 = 3.3;
+
+// ----- Calibration a `cal` command may set. -----
+/// Largest gain correction a `cal` command may set (our assumption: +-10 %).
+pub const CAL_MAX_GAIN_ERROR: f64 = 0.1;
+/// Largest offset correction a `cal` command may set, volts (our assumption).
+pub const CAL_MAX_OFFSET_V: f64 = 0.5;
