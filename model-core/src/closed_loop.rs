@@ -229,7 +229,11 @@ impl<S: StageModel, N: SensorNoise> Converted<S, N> {
     /// [`MAX_EXTRA_DELAY_SAMPLES`]), the line filled with `u_v` (the stage at rest there).
     pub fn with_extra_delay(mut self, samples: usize, u_v: f32) -> Result<Self, ConfigError> {
         if samples > MAX_EXTRA_DELAY_SAMPLES {
-            return Err(ConfigError::BadTimeConstant);
+            return Err(ConfigError::outside(
+                "extra_delay_samples",
+                0.0,
+                MAX_EXTRA_DELAY_SAMPLES as f64,
+            ));
         }
         self.delay = [u_v; MAX_EXTRA_DELAY_SAMPLES];
         self.delay_samples = samples;

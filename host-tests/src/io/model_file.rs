@@ -538,23 +538,17 @@ impl ModelFile {
             bail!("[resonance] mode_hz must be within 0..{nyquist} Hz and damping within 0..10");
         }
         if let Some(d) = c.drift {
-            d.validate().map_err(|e| {
-                anyhow::anyhow!(
-                    "[drift]: {e} (time constants 1 us..1e5 s, gains within +-1, K(u) u increasing)"
-                )
-            })?;
+            d.validate().map_err(|e| anyhow::anyhow!("[drift]: {e}"))?;
         }
         if let Some(g) = c.nonlinear_gain {
-            g.validate().map_err(|e| {
-                anyhow::anyhow!("[nonlinear-gain]: {e} (K' within 0.2..5, K'(u) u increasing)")
-            })?;
+            g.validate()
+                .map_err(|e| anyhow::anyhow!("[nonlinear-gain]: {e}"))?;
         }
         c.amplifier
             .validate()
-            .map_err(|e| anyhow::anyhow!("[amplifier] / [slew-rate-limit] / [saturation]: {e} (gain 1..100, slew 15..1500 V/ms, ranges inside -2..12 V in and -20..120 V out)"))?;
-        model_core::sensor::Sensor::new(&c.sensor).map_err(|e| {
-            anyhow::anyhow!("[converters]: {e} (sensor_gain 0.1..10, noise_v 0..1 V)")
-        })?;
+            .map_err(|e| anyhow::anyhow!("[amplifier] / [slew-rate-limit] / [saturation]: {e}"))?;
+        model_core::sensor::Sensor::new(&c.sensor)
+            .map_err(|e| anyhow::anyhow!("[converters]: {e}"))?;
         Ok(())
     }
 

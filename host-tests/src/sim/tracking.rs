@@ -225,12 +225,7 @@ pub fn validate(spec: &TrackSpec) -> anyhow::Result<()> {
         bail!("the noise must be a finite non-negative number of volts");
     }
     PreFilter::new(&spec.lag, &spec.plant, &spec.prefilter).map_err(|e| {
-        anyhow::anyhow!(
-            "invalid pre-filter (tau {} s, allowed {}..{} s): {e}",
-            spec.prefilter.tau_s,
-            params::PREFILTER_TAU_MIN_S,
-            params::PREFILTER_TAU_MAX_S
-        )
+        anyhow::anyhow!("invalid pre-filter (--tau {} s): {e}", spec.prefilter.tau_s)
     })?;
     Ok(())
 }
