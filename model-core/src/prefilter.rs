@@ -138,28 +138,19 @@
 //! value in the table with a noise gain below 2 ([`params::PREFILTER_TAU_S`]); it leaves a
 //! 100x cut of the sine error and 34x of the triangle's at 100 Hz.
 //!
-//! # Measured tracking (issue #3; `full_prefilter_cuts_the_error_tenfold_at_100_hz`)
-//! ```text
-//! 6 V p-p around 4 V     feedback alone      planning only       full pre-filter     cut
-//!                        rms      peak       rms      peak       rms      peak
-//! sine      10 Hz       42.4     61.0 mV    42.4     61.0 mV     0.29     1.14 mV   148x
-//! sine     100 Hz      425.4    602.5      424.9    601.5        4.25     6.83      100x
-//! sine     300 Hz     1305.0   1845.9     1290.8   1826.2       37.8     54.2        34x
-//! triangle  10 Hz       38.1     45.6      38.1     44.6         0.45    10.0        85x
-//! triangle 100 Hz      377.4    448.5     375.5    436.2        11.3     94.7        34x
-//! triangle 300 Hz     1105.1   1343.0    1087.8   1305.8        58.2    282.6        19x
-//! ```
-//! No sample clamped by the window or held by the slew limit; the largest command slew is
-//! 7.1 V/ms (300 Hz sine) against the 150 V/ms limit. Steps (20 Hz square wave): overshoot
-//! 0.11 % for 1 V steps and 0.04 % for 6 V steps with the pre-filter, 7.9 % without.
+//! # Measured tracking
+//! The tracking table (feedback alone, planning only, full pre-filter; sines and triangles at
+//! 10, 100 and 300 Hz) is measured by `piezo track` on the one closed-loop harness and kept in
+//! one place: `host-tests/README.md`, "Tracking". Test
+//! `full_prefilter_cuts_the_error_tenfold_at_100_hz` holds the tenfold cut.
 //!
 //! # Cost
 //! Per sample: 8 first-order sections (one with a compensated sum), one second-order section,
 //! one delay-line read with interpolation: about 30 multiplies and 60 additions, a dependent
 //! chain through 8 sections.
-//! Host (criterion, `benches/prefilter.rs`, a shared 2-core machine, so noisy): 45-55 ns per
-//! step; the sine generator 6-11 ns. On the Cortex-M (`piezo qemu bench`, QEMU counts
-//! instructions, not cycles): 170 instructions per step.
+//! Measured on the host by `benches/prefilter.rs` (criterion) and on the Cortex-M by
+//! `piezo qemu bench` (instructions per step): the figures are in `host-tests/README.md` and
+//! `firmware/qemu/README.md`.
 //!
 //! # Example
 //! ```
