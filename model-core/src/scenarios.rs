@@ -92,7 +92,7 @@ pub const FAULT_AT_S: f64 = 0.2;
 pub const MOVE_AT_S: f64 = 0.25;
 /// Where the reference moves in the stuck-sensor scenario, sensor volts.
 pub const MOVE_TO_V: f64 = 7.0;
-/// The absurd gain offered in the absurd-gain scenario (a thousand times [`LAG_KC_MAX`]).
+/// The absurd gain offered in the absurd-gain scenario (a thousand times [`params::LAG_KC_MAX`]).
 pub const ABSURD_KC: f64 = 1.0e9;
 /// Seed of the scenarios' sensor noise generator.
 pub const NOISE_SEED: u32 = 0x2545_f491;
