@@ -2,6 +2,10 @@
 //! with a bounded turning-point memory: the static map from amplifier control-input volts to
 //! sensor monitor volts, forward (prediction) and inverse (feedforward compensation).
 //!
+//! (One file over 900 lines on purpose: the table, its turning-point memory, the forward map
+//! and the inverse are one idea; forward and inverse share the reversal step and the memory's
+//! invariants, and splitting them would spread those invariants over files.)
+//!
 //! # Formulation: the Everett function of a Preisach model
 //! The Preisach model (sec. 5.3.2, eq. 5.4) writes the output as a weighted sum of relays
 //! `gamma_ab` that switch on when the input rises to `a` and off when it falls to `b`
