@@ -185,7 +185,9 @@ pub fn identify_drift(
         }
     }
     if !best.0.is_finite() {
-        bail!("the drift fit did not converge");
+        bail!(
+            "the drift fit did not converge: no time constants in the search grid give a finite residual"
+        );
     }
     // Pattern search in log tau.
     let mut step = 0.3f64;
@@ -219,7 +221,10 @@ pub fn identify_drift(
     let (coef, rms) = solve(&b, &best.1);
     // 4. Gains per volt of weighted input.
     let dw = base.weight(to_v) - base.weight(from_v);
-    ensure!(dw.abs() > 1e-6, "the step does not change the drift input");
+    ensure!(
+        dw.abs() > 1e-6,
+        "the step from {from_v:.3} V to {to_v:.3} V does not change the drift input K(u) (the model's drift poly is flat there)"
+    );
     let gains = [coef[1] / dw, coef[2] / dw, coef[3] / dw];
     let config = DriftConfig {
         gains,

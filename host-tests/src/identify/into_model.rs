@@ -9,6 +9,7 @@ use crate::identify::drift::{DriftFit, identify_drift};
 use crate::identify::hysteresis::identify_hysteresis;
 use crate::io::csv::Record;
 use crate::io::model_file::{DriftSection, HysteresisSection, ModelFile};
+use anyhow::{Context, ensure};
 use model_core::drift::DriftConfig;
 
 /// The drift branch's output for `u_v` held over each sample of `period_s`, starting at rest
@@ -38,8 +39,18 @@ pub fn drift_response(d: &DriftConfig, period_s: f64, u_v: &[f64]) -> Vec<f64> {
 /// the model's new name.
 pub fn drift_into(model: &mut ModelFile, rec: &Record, source: &str) -> anyhow::Result<DriftFit> {
     let base = model.stage_config()?.drift.unwrap_or_default();
-    let fit = identify_drift(&rec.t_s, &rec.u_v, rec.require_y()?, &base)?;
+    let fit = identify_drift(&rec.t_s, &rec.u_v, rec.require_y()?, &base)
+        .with_context(|| format!("drift identification from {source}"))?;
     let d: DriftConfig = fit.config;
+    let finite =
+        d.gains.iter().chain(&d.taus_s).all(|v| v.is_finite()) && fit.rms_residual_v.is_finite();
+    ensure!(
+        finite && d.gains.iter().any(|g| *g != 0.0),
+        "drift identification from {source}: the fit gave gains {:?} and time constants {:?} s, \
+         not a usable drift (is the record a step of u held long enough, with y responding?)",
+        d.gains,
+        d.taus_s
+    );
     model.drift = Some(DriftSection {
         gains: d.gains,
         taus_s: d.taus_s,
@@ -64,7 +75,8 @@ pub fn hysteresis_into(model: &mut ModelFile, rec: &Record, source: &str) -> any
             *yi -= di;
         }
     }
-    let table = identify_hysteresis(&rec.t_s, &rec.u_v, &y)?;
+    let table = identify_hysteresis(&rec.t_s, &rec.u_v, &y)
+        .with_context(|| format!("hysteresis identification from {source}"))?;
     model.hysteresis = Some(HysteresisSection::from_table(&table));
     let dropped = model.nonlinear_gain.take().is_some();
     model.name = format!("{} + hysteresis identified from {source}", model.name);

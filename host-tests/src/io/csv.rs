@@ -12,14 +12,50 @@
 //! * `y`: sensor monitor volts (required by [`Record::require_y`], optional for inputs);
 //! * `r`: reference volts (optional); any other column is ignored.
 //!
-//! Columns are separated by commas, surrounding spaces are trimmed, blank lines are skipped.
-//! Every failure is a [`RecordError`] naming the line and the problem: a missing column, a
-//! field that is not a number, NaN or infinite values, a row with the wrong number of fields,
-//! an empty file, a single sample, non-increasing or non-uniform time. Nothing here panics on
-//! any input (fuzzed in `tests/records.rs`).
+//! Columns are separated by commas, surrounding spaces are trimmed, blank lines are skipped,
+//! a UTF-8 byte-order mark at the start is ignored. Every failure is a [`RecordError`] naming
+//! where (the line of a CSV file, the element of a column handed to [`Record::new`], e.g. from
+//! a `.mat` file) and the problem: a missing column, a field that is not a number, NaN or
+//! infinite values, a value beyond [`MAX_ABS_V`], a row with the wrong number of fields, an
+//! empty file, a single sample, non-increasing or non-uniform time, a sampling rate outside
+//! [`MIN_RATE_HZ`]..[`MAX_RATE_HZ`]. Nothing here panics on any input (fuzzed in
+//! `tests/records.rs` and `tests/robustness.rs`).
+//!
+//! The bounds keep every value that reaches model-core (in `f32`) far inside its range, and
+//! every run's length in stage steps a number the verbs can bound before they start
+//! ([`crate::io::checks`]).
 
 use std::fmt::Write as _;
 use std::path::Path;
+
+/// Largest magnitude of a sample value (`u`, `y`, `r`), volts: the board's signals are within
+/// +-20 V; this leaves room for other scalings while keeping model-core's `f32` maths finite.
+pub const MAX_ABS_V: f64 = 1e6;
+/// Lowest sampling rate of a record, Hz (one sample every 1000 s).
+pub const MIN_RATE_HZ: f64 = 1e-3;
+/// Highest sampling rate of a record, Hz (10 MHz, 50 times the fastest loop rate).
+pub const MAX_RATE_HZ: f64 = 1e7;
+/// Largest magnitude of a sample time, seconds (about 30 000 years).
+pub const MAX_ABS_T_S: f64 = 1e12;
+
+/// Where in its source a sample is: a CSV line, or the element of a column (a `.mat`
+/// variable, or columns handed to [`Record::new`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum At {
+    /// 1-based line of a CSV file.
+    Line(usize),
+    /// 1-based element of a column.
+    Element(usize),
+}
+
+impl std::fmt::Display for At {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Self::Line(n) => write!(f, "line {n}"),
+            Self::Element(n) => write!(f, "element {n}"),
+        }
+    }
+}
 
 /// A uniformly sampled record.
 #[derive(Clone, Debug, PartialEq)]
@@ -40,6 +76,14 @@ pub enum RecordError {
     /// The file could not be read.
     #[error("cannot read {path}: {msg}")]
     Io {
+        /// The path.
+        path: String,
+        /// The system's message.
+        msg: String,
+    },
+    /// The file could not be written.
+    #[error("cannot write {path}: {msg}")]
+    Write {
         /// The path.
         path: String,
         /// The system's message.
@@ -93,23 +137,51 @@ pub enum RecordError {
         text: String,
     },
     /// A field is NaN or infinite.
-    #[error("line {line}: column `{column}` is {text} (samples must be finite)")]
+    #[error("{at}: column `{column}` is {text} (samples must be finite)")]
     NotFinite {
-        /// 1-based line.
-        line: usize,
+        /// Where.
+        at: At,
         /// The column.
         column: String,
         /// The field.
         text: String,
     },
+    /// A value beyond [`MAX_ABS_V`] (or a time beyond [`MAX_ABS_T_S`]).
+    #[error(
+        "{at}: column `{column}` is {value:e}, beyond +-{limit:e} (the largest magnitude a record may hold)"
+    )]
+    TooLarge {
+        /// Where.
+        at: At,
+        /// The column.
+        column: String,
+        /// The value.
+        value: f64,
+        /// The bound.
+        limit: f64,
+    },
+    /// The sampling rate is outside [`MIN_RATE_HZ`]..[`MAX_RATE_HZ`].
+    #[error(
+        "sampling rate {rate_hz:e} Hz (interval {period_s:e} s) is outside {min:e}..{max:e} Hz"
+    )]
+    Rate {
+        /// The record's rate.
+        rate_hz: f64,
+        /// Its mean interval.
+        period_s: f64,
+        /// Lowest rate accepted.
+        min: f64,
+        /// Highest rate accepted.
+        max: f64,
+    },
     /// Fewer than two samples.
     #[error("record has {0} sample(s): at least 2 are needed to know the sampling rate")]
     TooShort(usize),
     /// Time does not increase.
-    #[error("line {line}: time {t} s does not increase (previous sample {prev} s)")]
+    #[error("{at}: time {t} s does not increase (previous sample {prev} s)")]
     NotIncreasing {
-        /// 1-based line.
-        line: usize,
+        /// Where.
+        at: At,
         /// This time.
         t: f64,
         /// The previous time.
@@ -117,11 +189,11 @@ pub enum RecordError {
     },
     /// Non-uniform sampling.
     #[error(
-        "line {line}: sampling interval {dt} s differs from the mean interval {mean} s (records must be uniformly sampled)"
+        "{at}: sampling interval {dt} s differs from the mean interval {mean} s (records must be uniformly sampled)"
     )]
     NonUniform {
-        /// 1-based line.
-        line: usize,
+        /// Where.
+        at: At,
         /// This interval.
         dt: f64,
         /// The mean interval.
@@ -146,8 +218,37 @@ fn truncate(s: &str) -> String {
     s.chars().take(40).collect()
 }
 
+/// Every value of a column finite and within its bound ([`MAX_ABS_T_S`] for `t`, else
+/// [`MAX_ABS_V`]); `at` turns an index into the place to name.
+fn check_values(v: &[f64], column: &str, at: fn(usize) -> At) -> Result<(), RecordError> {
+    let limit = if column == "t" {
+        MAX_ABS_T_S
+    } else {
+        MAX_ABS_V
+    };
+    for (i, &x) in v.iter().enumerate() {
+        if !x.is_finite() {
+            return Err(RecordError::NotFinite {
+                at: at(i + 1),
+                column: column.into(),
+                text: x.to_string(),
+            });
+        }
+        if x.abs() > limit {
+            return Err(RecordError::TooLarge {
+                at: at(i + 1),
+                column: column.into(),
+                value: x,
+                limit,
+            });
+        }
+    }
+    Ok(())
+}
+
 impl Record {
-    /// A record from columns; checks lengths, finiteness and uniform sampling.
+    /// A record from columns; checks lengths, values (finite, within [`MAX_ABS_V`]), uniform
+    /// sampling and the rate. Errors name the element (1-based) of the column.
     pub fn new(
         t_s: Vec<f64>,
         u_v: Vec<f64>,
@@ -162,14 +263,8 @@ impl Record {
                     column,
                     len: v.len(),
                 })
-            } else if let Some(i) = v.iter().position(|x| !x.is_finite()) {
-                Err(RecordError::NotFinite {
-                    line: i + 2,
-                    column: column.into(),
-                    text: v[i].to_string(),
-                })
             } else {
-                Ok(())
+                check_values(v, column, At::Element)
             }
         };
         check(&t_s, "t")?;
@@ -181,23 +276,21 @@ impl Record {
             check(r, "r")?;
         }
         let rec = Self { t_s, u_v, y_v, r_v };
-        // Lines are data rows after one header line.
-        let lines: Vec<usize> = (0..n).map(|i| i + 2).collect();
-        rec.check_time(&lines)?;
+        rec.check_time(&|i| At::Element(i + 1))?;
         Ok(rec)
     }
 
-    fn check_time(&self, lines: &[usize]) -> Result<(), RecordError> {
+    fn check_time(&self, at: &dyn Fn(usize) -> At) -> Result<(), RecordError> {
         let t = &self.t_s;
         let n = t.len();
         if n < 2 {
             return Err(RecordError::TooShort(n));
         }
-        let line = |i: usize| lines.get(i).copied().unwrap_or(i + 2);
+        let line = at;
         for i in 1..n {
             if t[i] <= t[i - 1] {
                 return Err(RecordError::NotIncreasing {
-                    line: line(i),
+                    at: line(i),
                     t: t[i],
                     prev: t[i - 1],
                 });
@@ -209,17 +302,28 @@ impl Record {
             let dt = t[i] - t[i - 1];
             if (dt - mean).abs() > tol {
                 return Err(RecordError::NonUniform {
-                    line: line(i),
+                    at: line(i),
                     dt,
                     mean,
                 });
             }
+        }
+        let rate_hz = 1.0 / mean;
+        if !(MIN_RATE_HZ..=MAX_RATE_HZ).contains(&rate_hz) {
+            return Err(RecordError::Rate {
+                rate_hz,
+                period_s: mean,
+                min: MIN_RATE_HZ,
+                max: MAX_RATE_HZ,
+            });
         }
         Ok(())
     }
 
     /// Parse CSV text.
     pub fn parse(text: &str) -> Result<Self, RecordError> {
+        // A byte-order mark (as some spreadsheet programs write) is not part of the header.
+        let text = text.strip_prefix('\u{feff}').unwrap_or(text);
         let mut header: Option<(usize, Vec<String>)> = None;
         let (mut it, mut iu, mut iy, mut ir) = (0, 0, None, None);
         let mut cols: [Vec<f64>; 4] = Default::default();
@@ -277,9 +381,18 @@ impl Record {
                         })?;
                         if !v.is_finite() {
                             return Err(RecordError::NotFinite {
-                                line,
+                                at: At::Line(line),
                                 column,
                                 text: truncate(text),
+                            });
+                        }
+                        let limit = if c == 0 { MAX_ABS_T_S } else { MAX_ABS_V };
+                        if v.abs() > limit {
+                            return Err(RecordError::TooLarge {
+                                at: At::Line(line),
+                                column,
+                                value: v,
+                                limit,
                             });
                         }
                         cols[c].push(v);
@@ -298,7 +411,7 @@ impl Record {
             y_v: iy.map(|_| y_v),
             r_v: ir.map(|_| r_v),
         };
-        rec.check_time(&lines)?;
+        rec.check_time(&|i| At::Line(lines.get(i).copied().unwrap_or(0)))?;
         Ok(rec)
     }
 
@@ -348,11 +461,13 @@ impl Record {
         s
     }
 
-    /// Write a CSV file.
+    /// Write a CSV file (atomically: a temporary file renamed into place).
     pub fn write(&self, path: &Path) -> Result<(), RecordError> {
-        std::fs::write(path, self.to_csv()).map_err(|e| RecordError::Io {
-            path: path.display().to_string(),
-            msg: e.to_string(),
+        crate::io::checks::write_bytes(path, self.to_csv().as_bytes()).map_err(|e| {
+            RecordError::Write {
+                path: path.display().to_string(),
+                msg: e.root_cause().to_string(),
+            }
         })
     }
 

@@ -80,6 +80,19 @@ use std::path::Path;
 /// The built-in model names.
 pub const BUILT_IN: [&str; 2] = ["thesis-linear", "thesis-full"];
 
+/// A fixed-size array of exactly `N` values: serde alone would take the first `N` of a longer
+/// one and drop the rest without a word.
+fn exact<'de, D, T, const N: usize>(d: D) -> Result<[T; N], D::Error>
+where
+    D: serde::Deserializer<'de>,
+    T: Deserialize<'de>,
+{
+    let v: Vec<T> = Vec::deserialize(d)?;
+    let len = v.len();
+    v.try_into()
+        .map_err(|_| serde::de::Error::invalid_length(len, &format!("exactly {N} values").as_str()))
+}
+
 /// `[plant]`.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -147,12 +160,16 @@ pub struct ResonanceSection {
 #[serde(deny_unknown_fields)]
 pub struct DriftSection {
     /// Lag gains.
+    #[serde(deserialize_with = "exact")]
     pub gains: [f64; 3],
     /// Lag time constants, s.
+    #[serde(deserialize_with = "exact")]
     pub taus_s: [f64; 3],
     /// K(u), lowest power first.
+    #[serde(deserialize_with = "exact")]
     pub poly: [f64; 4],
     /// Range over which K is evaluated, V.
+    #[serde(deserialize_with = "exact")]
     pub poly_range_v: [f64; 2],
 }
 
@@ -161,8 +178,10 @@ pub struct DriftSection {
 #[serde(deny_unknown_fields)]
 pub struct GainSection {
     /// K'(u), lowest power first.
+    #[serde(deserialize_with = "exact")]
     pub poly: [f64; 3],
     /// Range over which K' is evaluated, V.
+    #[serde(deserialize_with = "exact")]
     pub range_v: [f64; 2],
 }
 
@@ -182,6 +201,7 @@ pub struct SlewSection {
 #[serde(deny_unknown_fields)]
 pub struct HysteresisSection {
     /// Input range of the table, volts at the amplifier input.
+    #[serde(deserialize_with = "exact")]
     pub input_range_v: [f64; 2],
     /// Output at the bottom of the range, sensor volts.
     pub offset_v: f64,
@@ -238,8 +258,10 @@ impl HysteresisSection {
 #[serde(deny_unknown_fields)]
 pub struct PlaySection {
     /// Thresholds, volts.
+    #[serde(deserialize_with = "exact")]
     pub radii_v: [f64; model_core::params::PLAY_OPERATORS],
     /// Weights, sensor volts per volt.
+    #[serde(deserialize_with = "exact")]
     pub weights: [f64; model_core::params::PLAY_OPERATORS],
 }
 
@@ -248,8 +270,10 @@ pub struct PlaySection {
 #[serde(deny_unknown_fields)]
 pub struct SaturationSection {
     /// Amplifier control input range, V.
+    #[serde(deserialize_with = "exact")]
     pub input_range_v: [f64; 2],
     /// Amplifier output range, V.
+    #[serde(deserialize_with = "exact")]
     pub output_range_v: [f64; 2],
 }
 
@@ -369,8 +393,7 @@ impl ModelFile {
 
     /// Write to `path`.
     pub fn write(&self, path: &Path) -> anyhow::Result<()> {
-        std::fs::write(path, self.to_toml()?)
-            .with_context(|| format!("cannot write {}", path.display()))
+        crate::io::checks::write_bytes(path, self.to_toml()?.as_bytes())
     }
 
     /// The model file describing `c`.

@@ -168,6 +168,10 @@ pub fn closed_loop_response(
     fundamental(&y_rec, w) / fundamental(&r_rec, w)
 }
 
+/// The lowest frequency the crossover is searched from, rad/s (lower would take seconds of
+/// simulation per point: the response is measured over whole periods).
+pub const CROSSOVER_MIN_RAD_S: f64 = 100.0;
+
 /// Bisection on `log w` for a sign change of `f` between `lo` and `hi`; 40 halvings.
 fn bisect_log(mut lo: f64, mut hi: f64, f: impl Fn(f64) -> f64) -> Option<f64> {
     let mut f_lo = f(lo);
@@ -227,7 +231,7 @@ pub fn loop_figures(setup: &LoopSetup) -> Result<LoopFigures, ConfigError> {
     // The crossover lies well below the stage mode; search 100 rad/s .. 1/4 of Nyquist.
     let nyq_rad_s = PI / setup.lag.period_s;
     let w_max = (0.25 * nyq_rad_s).min(2.0 * PI * 4000.0);
-    let crossover = bisect_log(100.0, w_max, |w| l(w).norm().ln());
+    let crossover = bisect_log(CROSSOVER_MIN_RAD_S, w_max, |w| l(w).norm().ln());
     let phase_margin = crossover.map(|w| (-l(w)).arg().to_degrees());
     // Phase crossover: arg(-L) goes from +90 deg (the integrator) through zero.
     let w180 = bisect_log(100.0, w_max, |w| (-l(w)).arg());

@@ -22,6 +22,7 @@
 //!   10 V/s ramps; the record is as long as the protocol needs (`--seconds` is ignored).
 
 use crate::identify::hysteresis::{ForcProtocol, forc_protocol};
+use crate::io::checks::{self, within};
 use crate::io::csv::Record;
 use crate::io::model_file::ModelFile;
 use crate::sim::open_loop::simulate;
@@ -76,23 +77,30 @@ impl SynthSpec {
     pub fn check(&self) -> anyhow::Result<()> {
         ensure!(
             self.seconds.is_finite() && self.seconds > 0.0 && self.seconds <= 3600.0,
-            "--seconds must be within (0, 3600]"
+            "--seconds must be within (0, 3600] s (got {})",
+            self.seconds
         );
         ensure!(
             self.rate.is_finite() && (10.0..=1e6).contains(&self.rate),
-            "--rate must be within 10 Hz..1 MHz"
+            "--rate must be within 10..1e6 Hz (got {})",
+            self.rate
         );
         ensure!(
             self.seconds * self.rate <= 5e7,
-            "record too long: at most 5e7 samples"
+            "record too long: {:e} samples, at most 5e7 (lower --seconds or --rate)",
+            self.seconds * self.rate
         );
         ensure!(
             self.seconds * self.rate >= 2.0,
-            "record too short: fewer than 2 samples"
+            "record too short: {} s at {} Hz is fewer than 2 samples",
+            self.seconds,
+            self.rate
         );
         ensure!(
             self.amplitude.is_finite() && self.offset.is_finite(),
-            "--amplitude and --offset must be finite"
+            "--amplitude and --offset must be finite (got {} and {})",
+            self.amplitude,
+            self.offset
         );
         ensure!(
             self.offset >= -2.0 && self.offset + self.amplitude <= 12.0 && self.amplitude >= 0.0,
@@ -102,19 +110,24 @@ impl SynthSpec {
         );
         ensure!(
             self.freq.is_finite() && self.freq > 0.0 && self.freq < self.rate / 2.0,
-            "--freq must be within (0, rate/2)"
+            "--freq must be within (0, rate/2) = (0, {}) Hz (got {})",
+            self.rate / 2.0,
+            self.freq
         );
         ensure!(
             self.freq_end.is_finite() && self.freq_end > 0.0 && self.freq_end < self.rate / 2.0,
-            "--freq-end must be within (0, rate/2)"
+            "--freq-end must be within (0, rate/2) = (0, {}) Hz (got {})",
+            self.rate / 2.0,
+            self.freq_end
         );
         if let Some(h) = self.hold {
-            ensure!(h.is_finite() && h > 0.0, "--hold must be positive");
+            // At least one sample per level: the work is then bounded by the record's length.
+            within("--hold", h, 1.0 / self.rate, 3600.0, "s")?;
         }
         if let Some(n) = self.noise_v {
             ensure!(
                 n.is_finite() && (0.0..=1.0).contains(&n),
-                "--noise-v must be within 0..1 V"
+                "--noise-v must be within 0..1 V (got {n})"
             );
         }
         Ok(())
@@ -192,6 +205,15 @@ pub fn synth(a: &SynthSpec) -> anyhow::Result<Record> {
         let u_v = input(a, &t_s)?;
         (t_s, u_v)
     };
+    let span_s = t_s[t_s.len() - 1] - t_s[0];
+    checks::bound_steps(
+        &format!(
+            "a {span_s} s record at the model's step of {} s",
+            model.period_s
+        ),
+        checks::stage_steps(span_s, model.period_s),
+        checks::max_stage_steps(),
+    )?;
     let y = simulate(&stage, model.period_s, &t_s, &u_v);
     Ok(Record::new(t_s, u_v, Some(y), None)?)
 }

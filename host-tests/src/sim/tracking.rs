@@ -17,6 +17,7 @@
 //! primed in open loop, then closed); after a warm-up of at least 0.2 s and 3 periods (the
 //! periodic steady state), the figures are taken over whole periods: at least 0.1 s and 2
 //! periods.
+use crate::io::checks::within;
 use crate::sim::closed_loop;
 use anyhow::{Context, bail};
 use model_core::controller::{Controller, ControllerConfig, ReferenceSource};
@@ -224,6 +225,13 @@ pub fn validate(spec: &TrackSpec) -> anyhow::Result<()> {
     if !(spec.noise_v.is_finite() && spec.noise_v >= 0.0) {
         bail!("the noise must be a finite non-negative number of volts");
     }
+    within(
+        "--tau",
+        spec.prefilter.tau_s,
+        params::PREFILTER_TAU_MIN_S,
+        params::PREFILTER_TAU_MAX_S,
+        "s",
+    )?;
     PreFilter::new(&spec.lag, &spec.plant, &spec.prefilter).map_err(|e| {
         anyhow::anyhow!("invalid pre-filter (--tau {} s): {e}", spec.prefilter.tau_s)
     })?;
@@ -295,10 +303,14 @@ pub fn plot(
     title: &str,
     path: &std::path::Path,
 ) -> anyhow::Result<()> {
-    use plotters::prelude::*;
     if tr.is_empty() {
         bail!("nothing recorded to plot");
     }
+    crate::io::checks::write_atomic(path, |tmp| draw(tr, title, tmp))
+}
+
+fn draw(tr: &[(f64, f64, f64, f64)], title: &str, path: &std::path::Path) -> anyhow::Result<()> {
+    use plotters::prelude::*;
     let t0 = tr[0].0;
     let ms = |t: f64| (t - t0) * 1e3;
     let t_end = ms(tr[tr.len() - 1].0).max(1e-6);

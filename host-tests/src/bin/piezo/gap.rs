@@ -10,8 +10,9 @@
 
 use clap::Args;
 use host_tests::gap::{Options, diagnose, load_data, report};
+use host_tests::io::checks;
 use host_tests::io::model_file::ModelFile;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 /// Arguments of `piezo gap`.
 #[derive(Args, Debug, Clone)]
@@ -41,9 +42,21 @@ pub fn run(a: &GapArgs) -> anyhow::Result<()> {
     if let Some(v) = &a.vars {
         host_tests::io::mat::parse_vars(v)?;
     }
+    if let Some(out) = &a.out {
+        let mut inputs: Vec<&Path> = a.data.iter().map(PathBuf::as_path).collect();
+        inputs.push(Path::new(&a.model));
+        checks::refuse_overwrite(out, &inputs)?;
+    }
     let base = ModelFile::load(&a.model)?;
     let data = load_data(&a.data, a.vars.as_deref())?;
+    let sizes: Vec<(String, usize, f64)> = data
+        .iter()
+        .map(|d| (d.name.clone(), d.len(), d.t_s[d.len() - 1] - d.t_s[0]))
+        .collect();
+    checks::bound_gap(&sizes, base.period_s)?;
     let d = diagnose(&base, &data, &Options { progress: true })?;
+    // A figure that came out NaN or infinite is an error, before anything is written.
+    checks::finite_json(&d.to_json(), "the result")?;
     if let Some(p) = &a.out {
         let mut m = d.model.clone();
         m.name = format!("{} + gap: {}", base.name, d.named.join(", "));

@@ -5,9 +5,10 @@
 use anyhow::Context;
 use clap::{Args, Subcommand};
 use host_tests::identify::into_model::{drift_into, hysteresis_into};
+use host_tests::io::checks;
 use host_tests::io::csv::Record;
 use host_tests::io::model_file::ModelFile;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 /// Flags shared by every `identify` target.
 #[derive(Args, Debug)]
@@ -41,9 +42,11 @@ pub struct IdentifyArgs {
 }
 
 fn load(f: &IdentifyFlags) -> anyhow::Result<(ModelFile, Record)> {
+    checks::refuse_overwrite(&f.out, &[&f.data, Path::new(&f.model)])?;
     let model = ModelFile::load(&f.model)?;
     let rec = Record::read(&f.data).with_context(|| format!("record {}", f.data.display()))?;
-    rec.require_y()?;
+    rec.require_y()
+        .with_context(|| format!("record {}", f.data.display()))?;
     Ok((model, rec))
 }
 

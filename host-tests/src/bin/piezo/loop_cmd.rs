@@ -2,7 +2,8 @@
 //! discrete loop of model-core's compensator and plant at the chosen rate and gain
 //! ([`host_tests::sim::analysis`]).
 use clap::Args;
-use host_tests::sim::analysis::{LoopSetup, loop_figures};
+use host_tests::io::checks;
+use host_tests::sim::analysis::{CROSSOVER_MIN_RAD_S, LoopSetup, loop_figures, open_loop_response};
 use model_core::params;
 
 /// Arguments of `piezo loop`.
@@ -14,7 +15,8 @@ pub struct LoopArgs {
     /// Loop rate, Hz (10000..200000).
     #[arg(long, default_value_t = params::SAMPLE_RATE_HZ, allow_negative_numbers = true)]
     pub rate: f64,
-    /// Compensator gain Kc (0..1e6].
+    /// Compensator gain Kc (0..1e6]; the figures exist from about Kc = 400 (below, the gain
+    /// crossover falls under the measured 100 rad/s and the verb says so).
     #[arg(long, default_value_t = params::LAG_KC, allow_negative_numbers = true)]
     pub kc: f64,
 }
@@ -25,14 +27,48 @@ fn fmt(v: Option<f64>, unit: &str) -> String {
 
 /// Run `piezo loop`.
 pub fn run(a: &LoopArgs) -> anyhow::Result<()> {
-    if !(a.rate.is_finite() && a.rate > 0.0) {
-        anyhow::bail!("--rate must be a positive number of Hz, got {}", a.rate);
+    checks::within(
+        "--rate",
+        a.rate,
+        params::MIN_SAMPLE_RATE_HZ,
+        params::MAX_SAMPLE_RATE_HZ,
+        "Hz",
+    )?;
+    if !(a.kc.is_finite() && a.kc > 0.0 && a.kc <= params::LAG_KC_MAX) {
+        anyhow::bail!(
+            "--kc must be within (0, {}] (got {})",
+            params::LAG_KC_MAX,
+            a.kc
+        );
     }
     let setup = LoopSetup::thesis(a.rate, a.kc);
     setup
         .validate()
         .map_err(|e| anyhow::anyhow!("invalid loop (--rate {} --kc {}): {e}", a.rate, a.kc))?;
     let f = loop_figures(&setup).map_err(|e| anyhow::anyhow!("{e}"))?;
+    // No crossover in the measured band: no figure at all, which is an answer only as an error.
+    if f.crossover_rad_s.is_none() {
+        let low = open_loop_response(&setup, CROSSOVER_MIN_RAD_S, 0.2, 5.0).norm() < 1.0;
+        anyhow::bail!(
+            "no gain crossover between {CROSSOVER_MIN_RAD_S} rad/s and a quarter of Nyquist at --kc {}: \
+             the loop gain is {} 1 over the whole measured band, so no figure can be measured \
+             (the crossover moves with Kc: about 0.31 rad/s per unit of Kc; choose --kc from about 400)",
+            a.kc,
+            if low { "below" } else { "above" }
+        );
+    }
+    for (name, v) in [
+        ("gain margin", f.gain_margin_db),
+        ("phase margin", f.phase_margin_deg),
+        ("gain crossover", f.crossover_rad_s),
+        ("closed-loop bandwidth", f.bandwidth_hz),
+        ("step overshoot", f.step_overshoot_pct),
+        ("settling time", f.settling_2pct_ms),
+    ] {
+        if let Some(v) = v {
+            checks::finite(name, v)?;
+        }
+    }
     if a.json {
         println!("{}", serde_json::to_string(&f)?);
         return Ok(());

@@ -2,10 +2,10 @@
 //! it as a CSV record (`t,u,y,r,flags`) that the model tools read ([`host_tests::board`]: the
 //! serial line's set-up and the exchange are described there).
 
-use anyhow::bail;
 use clap::Args;
 use host_tests::board::capture::{Options, record, write_csv};
 use host_tests::board::link::{SerialLink, setup_port};
+use host_tests::io::checks;
 use std::path::PathBuf;
 use std::time::Duration;
 
@@ -15,7 +15,8 @@ pub struct RecordArgs {
     /// Serial device of the board (the ST-LINK virtual COM port), e.g. /dev/ttyACM0.
     #[arg(long)]
     pub port: PathBuf,
-    /// Seconds to record at the loop rate (the board holds 50000 samples: 1 s at 50 kHz).
+    /// Seconds to record at the loop rate (the board holds 50000 samples: 1 s at 50 kHz;
+    /// within 1e-6..3600 s).
     #[arg(long)]
     pub seconds: f64,
     /// CSV file to write (columns t,u,y,r,flags).
@@ -25,7 +26,7 @@ pub struct RecordArgs {
     /// yourself.
     #[arg(long)]
     pub baud: Option<u32>,
-    /// Seconds without any byte from the board before a step is given up.
+    /// Seconds without any byte from the board before a step is given up (0.001..3600 s).
     #[arg(long, default_value_t = 5.0)]
     pub timeout: f64,
     /// How many times missing ranges are asked for again.
@@ -35,9 +36,8 @@ pub struct RecordArgs {
 
 /// Run `piezo record`.
 pub fn run(a: &RecordArgs) -> anyhow::Result<()> {
-    if !(a.timeout.is_finite() && a.timeout > 0.0) {
-        bail!("--timeout must be a positive number of seconds");
-    }
+    checks::within("--timeout", a.timeout, 1e-3, 3600.0, "s")?;
+    checks::within("--seconds", a.seconds, 1e-6, 3600.0, "s")?;
     if let Some(baud) = a.baud {
         setup_port(&a.port, baud)?;
     }

@@ -3,10 +3,11 @@
 
 use anyhow::Context;
 use clap::Args;
+use host_tests::io::checks;
 use host_tests::io::csv::Record;
 use host_tests::io::model_file::ModelFile;
 use host_tests::sim::open_loop::simulate;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 /// Arguments of `piezo simulate`.
 #[derive(Args, Debug)]
@@ -27,6 +28,7 @@ pub struct SimulateArgs {
 
 /// Run `piezo simulate`.
 pub fn run(a: &SimulateArgs) -> anyhow::Result<()> {
+    checks::refuse_overwrite(&a.output, &[&a.input, Path::new(&a.model)])?;
     let mut model = ModelFile::load(&a.model)?;
     if a.no_noise {
         model.converters.noise_v = 0.0;
@@ -34,8 +36,19 @@ pub fn run(a: &SimulateArgs) -> anyhow::Result<()> {
     let stage = model.build_stage()?;
     let rec =
         Record::read(&a.input).with_context(|| format!("input record {}", a.input.display()))?;
+    let span_s = rec.t_s[rec.len() - 1] - rec.t_s[0];
+    checks::bound_steps(
+        &format!(
+            "simulating {} ({span_s:.6e} s at the model's step of {} s)",
+            a.input.display(),
+            model.period_s
+        ),
+        checks::stage_steps(span_s, model.period_s),
+        checks::max_stage_steps(),
+    )?;
     let y = simulate(&stage, model.period_s, &rec.t_s, &rec.u_v);
-    let out = Record::new(rec.t_s, rec.u_v, Some(y), None)?;
+    let out = Record::new(rec.t_s, rec.u_v, Some(y), None)
+        .context("the simulated output is out of range (the model's response diverges)")?;
     out.write(&a.output)?;
     eprintln!(
         "simulated {} samples ({:.3} s at {:.0} Hz) with model `{}` -> {}",

@@ -4,8 +4,9 @@
 
 use clap::{Args, ValueEnum};
 use host_tests::gap::protocol;
+use host_tests::io::checks;
 use host_tests::sim::synth::{Protocol, SynthSpec, synth};
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 /// The input protocols.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
@@ -21,7 +22,7 @@ pub enum ProtocolArg {
     /// Raised sine with a linear frequency sweep.
     Chirp,
     /// The model-gap recording protocol: a fast and a slow record
-    /// (`crate::gap::protocol`; `--seconds` is the slow record's length, at least 20 s).
+    /// (`crate::gap::protocol`; `--seconds` is the slow record's length, 20..3600 s).
     Identification,
 }
 
@@ -40,10 +41,11 @@ pub struct SynthArgs {
     /// Output record (CSV t,u,y).
     #[arg(long)]
     pub output: PathBuf,
-    /// Record length, seconds.
-    #[arg(long, default_value_t = 2.0)]
-    pub seconds: f64,
-    /// Record sampling rate, Hz.
+    /// Record length, seconds [default: 2] (0..3600; identification: the slow record,
+    /// 20..3600, default 20; forc: set by the protocol).
+    #[arg(long)]
+    pub seconds: Option<f64>,
+    /// Record sampling rate, Hz (10..1e6).
     #[arg(long, default_value_t = model_core::params::SAMPLE_RATE_HZ)]
     pub rate: f64,
     /// Span of the input above the offset, volts (forc: use 10 for the 0..10 V table).
@@ -58,7 +60,8 @@ pub struct SynthArgs {
     /// End frequency of the chirp, Hz.
     #[arg(long, default_value_t = 100.0)]
     pub freq_end: f64,
-    /// Time per level of `steps`, seconds (default: the whole record, i.e. one step).
+    /// Time per level of `steps`, seconds (default: the whole record, i.e. one step; at least
+    /// one sample, at most 3600 s).
     #[arg(long)]
     pub hold: Option<f64>,
     /// Sensor noise, volts 1-sigma (default: the model's).
@@ -82,8 +85,30 @@ impl ProtocolArg {
 
 /// Run `piezo synth`.
 pub fn run(a: &SynthArgs) -> anyhow::Result<()> {
+    checks::refuse_overwrite(&a.output, &[Path::new(&a.model)])?;
+    let spec = SynthSpec {
+        model: a.model.clone(),
+        protocol: a.protocol.protocol().unwrap_or(Protocol::Steps),
+        seed: a.seed,
+        seconds: a.seconds.unwrap_or(2.0),
+        rate: a.rate,
+        amplitude: a.amplitude,
+        offset: a.offset,
+        freq: a.freq,
+        freq_end: a.freq_end,
+        hold: a.hold,
+        noise_v: a.noise_v,
+    };
     let Some(p) = a.protocol.protocol() else {
-        for (tag, rec) in protocol::synth_identification(&a.model, a.seed, a.noise_v, a.seconds)? {
+        // The identification protocol has its own rates and levels, but every flag given is
+        // still checked (a NaN is never taken silently); its slow record is 20..3600 s.
+        let seconds = checks::within("--seconds", a.seconds.unwrap_or(20.0), 20.0, 3600.0, "s")?;
+        SynthSpec {
+            seconds: 1.0,
+            ..spec.clone()
+        }
+        .check()?;
+        for (tag, rec) in protocol::synth_identification(&a.model, a.seed, a.noise_v, seconds)? {
             let path = protocol::record_path(&a.output, tag);
             rec.write(&path)?;
             eprintln!(
@@ -94,26 +119,15 @@ pub fn run(a: &SynthArgs) -> anyhow::Result<()> {
         }
         return Ok(());
     };
-    let spec = SynthSpec {
-        model: a.model.clone(),
-        protocol: p,
-        seed: a.seed,
-        seconds: a.seconds,
-        rate: a.rate,
-        amplitude: a.amplitude,
-        offset: a.offset,
-        freq: a.freq,
-        freq_end: a.freq_end,
-        hold: a.hold,
-        noise_v: a.noise_v,
-    };
+    debug_assert_eq!(spec.protocol, p);
     let rec = synth(&spec)?;
     rec.write(&a.output)?;
+    // What was written (forc sets its own length).
     eprintln!(
-        "wrote {} samples ({} s at {} Hz, protocol {:?}) to {}",
+        "wrote {} samples ({:.3} s at {:.1} Hz, protocol {:?}) to {}",
         rec.len(),
-        a.seconds,
-        a.rate,
+        rec.t_s[rec.len() - 1] - rec.t_s[0] + rec.period_s(),
+        rec.rate_hz(),
         a.protocol,
         a.output.display()
     );

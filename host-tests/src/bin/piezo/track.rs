@@ -76,7 +76,7 @@ pub struct TrackArgs {
     /// Pre-filter: off (feedback alone), planning, on (full pre-filter).
     #[arg(long, value_enum, default_value_t = PrefilterArg::On)]
     pub prefilter: PrefilterArg,
-    /// Time constant of the four planning poles, seconds.
+    /// Time constant of the four planning poles, seconds (1e-5..1e-3).
     #[arg(long, default_value_t = params::PREFILTER_TAU_S, allow_negative_numbers = true)]
     pub tau: f64,
     /// The stage the loop drives: a built-in name (thesis-linear, thesis-full) or a model
@@ -119,6 +119,13 @@ pub fn run(a: &TrackArgs) -> anyhow::Result<()> {
         plot(&r.trace[r.trace.len() - keep..], &title, path)?;
     }
     let f = r.figures;
+    for (name, v) in [
+        ("RMS error", f.rms_error_v),
+        ("peak error", f.max_error_v),
+        ("largest command slew", f.max_slew_v_per_ms),
+    ] {
+        host_tests::io::checks::finite(name, v)?;
+    }
     if a.json {
         println!("{}", serde_json::to_string(&f)?);
         return Ok(());

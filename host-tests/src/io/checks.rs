@@ -1,0 +1,239 @@
+//! The checks every verb shares, defined once: numbers where they enter (a flag within its
+//! range, a figure that must be finite), the bound on the work a run may take, and outputs
+//! written atomically and never over an input.
+//!
+//! * **Flags:** [`within`] refuses a NaN, an infinity or a value outside `lo..=hi`, and says
+//!   the range: `--hold must be within 2e-5..3600 s (got 1e-12)`.
+//! * **Work:** a verb that simulates counts the stage steps it will take *before* it starts
+//!   ([`stage_steps`]) and refuses above [`max_stage_steps`] (1e8 steps, some seconds of work;
+//!   the environment variable `PIEZO_MAX_STEPS` raises or lowers it). The message says the
+//!   count, the limit and how to change either. Records themselves are bounded in rate
+//!   ([`crate::io::csv::MIN_RATE_HZ`]..[`crate::io::csv::MAX_RATE_HZ`]) and in value
+//!   ([`crate::io::csv::MAX_ABS_V`]) by the reader.
+//! * **Results:** [`finite`] turns a NaN or infinite figure into an error naming it, so a
+//!   verb never exits 0 with a figure it could not compute.
+//! * **Outputs:** [`write_atomic`] writes `path.tmp-piezo-PID` beside the target and renames
+//!   it into place, so a failed or interrupted run never leaves half a file, and an existing
+//!   file is only replaced by a complete one. [`refuse_overwrite`] refuses an output that is
+//!   one of the inputs (same path, or the same file through another name).
+
+use anyhow::{Context, bail};
+use std::path::{Path, PathBuf};
+
+/// The default bound on the stage steps one run may simulate (each is some tens of ns).
+pub const DEFAULT_MAX_STAGE_STEPS: u64 = 100_000_000;
+
+/// The environment variable that changes [`DEFAULT_MAX_STAGE_STEPS`].
+pub const MAX_STEPS_ENV: &str = "PIEZO_MAX_STEPS";
+
+/// `flag`'s value if it is finite and within `lo..=hi`; otherwise an error saying the range
+/// (with `unit`, e.g. `"s"`, `"Hz"`, `""`).
+pub fn within(flag: &str, v: f64, lo: f64, hi: f64, unit: &str) -> anyhow::Result<f64> {
+    if v.is_finite() && v >= lo && v <= hi {
+        return Ok(v);
+    }
+    let unit = if unit.is_empty() {
+        String::new()
+    } else {
+        format!(" {unit}")
+    };
+    bail!(
+        "{flag} must be within {}..{}{unit} (got {})",
+        num(lo),
+        num(hi),
+        num(v)
+    )
+}
+
+/// A number as a person writes it: plain between 1e-4 and 1e7, else in exponent form.
+pub fn num(v: f64) -> String {
+    let a = v.abs();
+    if v == 0.0 || !v.is_finite() || (1e-4..1e7).contains(&a) {
+        format!("{v}")
+    } else {
+        format!("{v:e}")
+    }
+}
+
+/// `v` if finite, else an error naming the figure: a result that could not be computed.
+pub fn finite(figure: &str, v: f64) -> anyhow::Result<f64> {
+    if v.is_finite() {
+        Ok(v)
+    } else {
+        bail!("{figure} came out as {v}: the result cannot be computed from these inputs")
+    }
+}
+
+/// The index and value of the first non-finite element of `v`, if any.
+pub fn first_non_finite(v: &[f64]) -> Option<(usize, f64)> {
+    v.iter().position(|x| !x.is_finite()).map(|i| (i, v[i]))
+}
+
+/// The bound on stage steps per run: `PIEZO_MAX_STEPS` if set to a positive integer, else
+/// [`DEFAULT_MAX_STAGE_STEPS`].
+pub fn max_stage_steps() -> u64 {
+    std::env::var(MAX_STEPS_ENV)
+        .ok()
+        .and_then(|s| s.trim().parse::<u64>().ok())
+        .filter(|&n| n > 0)
+        .unwrap_or(DEFAULT_MAX_STAGE_STEPS)
+}
+
+/// Stage steps needed to cover `span_s` seconds at the step `period_s` (saturating; a
+/// non-finite ratio counts as `u64::MAX`).
+pub fn stage_steps(span_s: f64, period_s: f64) -> u64 {
+    let n = (span_s / period_s).ceil();
+    if n.is_finite() && n >= 0.0 {
+        if n >= u64::MAX as f64 {
+            u64::MAX
+        } else {
+            n as u64
+        }
+    } else {
+        u64::MAX
+    }
+}
+
+/// Refuses `steps` above `limit`, saying what asked for them, the limit and how to change it.
+pub fn bound_steps(what: &str, steps: u64, limit: u64) -> anyhow::Result<()> {
+    if steps <= limit {
+        return Ok(());
+    }
+    bail!(
+        "{what} needs {steps:.3e} stage steps, more than the limit of {limit:.1e} \
+         (set {MAX_STEPS_ENV}=N to change it, or shorten the record / raise the model's period_s)",
+        steps = steps as f64,
+        limit = limit as f64
+    )
+}
+
+/// The most samples `piezo gap` takes over all its records: its fits hold several
+/// simulations of every record at once (about 550 MB and half a minute per million samples).
+pub const GAP_MAX_SAMPLES: usize = 2_000_000;
+
+/// `piezo gap` simulates each record some tens of times: its bound on stage steps (summed over
+/// the records) is [`max_stage_steps`] divided by this.
+pub const GAP_RUNS_PER_RECORD: u64 = 20;
+
+/// Bounds `piezo gap`'s work before it starts: `records` are (name, samples, span in
+/// seconds), `period_s` the model's step.
+pub fn bound_gap(records: &[(String, usize, f64)], period_s: f64) -> anyhow::Result<()> {
+    let samples: usize = records.iter().map(|r| r.1).sum();
+    if samples > GAP_MAX_SAMPLES {
+        bail!(
+            "the records hold {samples} samples in all, more than the {GAP_MAX_SAMPLES} the model-gap \
+             workflow takes (about 550 MB per million): decimate them or cut them shorter"
+        );
+    }
+    let steps = records
+        .iter()
+        .map(|r| stage_steps(r.2, period_s))
+        .fold(0u64, u64::saturating_add);
+    let names: Vec<&str> = records.iter().map(|r| r.0.as_str()).collect();
+    bound_steps(
+        &format!(
+            "the model-gap workflow on {} ({} stage steps per pass at {period_s} s, {GAP_RUNS_PER_RECORD} passes)",
+            names.join(", "),
+            steps
+        ),
+        steps.saturating_mul(GAP_RUNS_PER_RECORD),
+        max_stage_steps(),
+    )
+}
+
+/// Refuses a JSON result holding a `null` where a number was due (serde writes NaN and
+/// infinities as `null`), naming the key.
+pub fn finite_json(v: &serde_json::Value, at: &str) -> anyhow::Result<()> {
+    match v {
+        serde_json::Value::Null => {
+            bail!(
+                "{at} came out as NaN or infinite: the result cannot be computed from these inputs"
+            )
+        }
+        serde_json::Value::Array(a) => a
+            .iter()
+            .enumerate()
+            .try_for_each(|(i, x)| finite_json(x, &format!("{at}[{i}]"))),
+        serde_json::Value::Object(o) => o
+            .iter()
+            .try_for_each(|(k, x)| finite_json(x, &format!("{at}.{k}"))),
+        _ => Ok(()),
+    }
+}
+
+/// Refuses an output path that is one of `inputs` (the same path, or the same existing file).
+pub fn refuse_overwrite(output: &Path, inputs: &[&Path]) -> anyhow::Result<()> {
+    let out_canon = std::fs::canonicalize(output).ok();
+    for input in inputs {
+        let same_path = output == *input;
+        let same_file = out_canon.is_some() && out_canon == std::fs::canonicalize(input).ok();
+        if same_path || same_file {
+            bail!(
+                "the output {} is also an input: write the result to another file",
+                output.display()
+            );
+        }
+    }
+    Ok(())
+}
+
+/// The temporary file [`write_atomic`] writes before renaming: beside `path`, same folder.
+pub fn temp_path(path: &Path) -> PathBuf {
+    let name = path
+        .file_name()
+        .map_or_else(|| "out".into(), |n| n.to_string_lossy().into_owned());
+    path.with_file_name(format!(".{name}.tmp-piezo-{}", std::process::id()))
+}
+
+/// Write `path` through `fill` (which writes the temporary path it is given), then rename
+/// into place; the temporary file is removed on failure. Errors name `path`.
+pub fn write_atomic(
+    path: &Path,
+    fill: impl FnOnce(&Path) -> anyhow::Result<()>,
+) -> anyhow::Result<()> {
+    let tmp = temp_path(path);
+    let r = match path.parent().filter(|d| !d.as_os_str().is_empty()) {
+        Some(dir) if !dir.is_dir() => Err(anyhow::anyhow!(
+            "the folder {} does not exist",
+            dir.display()
+        )),
+        _ => fill(&tmp).and_then(|()| {
+            std::fs::rename(&tmp, path).context("cannot move the finished file into place")
+        }),
+    };
+    if r.is_err() {
+        let _ = std::fs::remove_file(&tmp);
+    }
+    r.with_context(|| format!("cannot write {}", path.display()))
+}
+
+/// [`write_atomic`] of bytes.
+pub fn write_bytes(path: &Path, bytes: &[u8]) -> anyhow::Result<()> {
+    write_atomic(path, |tmp| {
+        std::fs::write(tmp, bytes).map_err(anyhow::Error::from)
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn within_says_the_range() {
+        let e = within("--hold", 1e-12, 2e-5, 3600.0, "s").unwrap_err();
+        assert_eq!(
+            e.to_string(),
+            "--hold must be within 2e-5..3600 s (got 1e-12)"
+        );
+        assert!(within("--rate", f64::NAN, 1.0, 2.0, "Hz").is_err());
+        assert_eq!(within("--x", 1.5, 1.0, 2.0, "").unwrap(), 1.5);
+    }
+
+    #[test]
+    fn steps_saturate() {
+        assert_eq!(stage_steps(1.0, 0.5), 2);
+        assert_eq!(stage_steps(1e300, 1e-300), u64::MAX);
+        assert_eq!(stage_steps(f64::NAN, 1.0), u64::MAX);
+        assert!(bound_steps("x", 10, 5).is_err());
+    }
+}
