@@ -322,9 +322,27 @@ impl<P: LoopPlant> ClosedLoop<P> {
     /// One sample, the ADC's code passed through `fault` first (a saturated or stuck sensor).
     #[inline]
     pub fn step_reading(&mut self, fault: impl FnOnce(AdcCode) -> AdcCode) -> LoopSample {
+        self.step_full(fault, 0.0)
+    }
+
+    /// One sample with a learned correction added to the loop's reference
+    /// ([`Controller::step_with_correction`], [`crate::learning`]).
+    #[inline]
+    pub fn step_with_correction(&mut self, correction_v: f32) -> LoopSample {
+        self.step_full(|adc| adc, correction_v)
+    }
+
+    #[inline]
+    fn step_full(
+        &mut self,
+        fault: impl FnOnce(AdcCode) -> AdcCode,
+        correction_v: f32,
+    ) -> LoopSample {
         let output_v = self.plant.output_v();
         let adc = fault(self.plant.read());
-        let sample = self.controller.step(&mut self.state, adc);
+        let sample = self
+            .controller
+            .step_with_correction(&mut self.state, adc, correction_v);
         let plant_input_v = self.plant.drive(sample.dac);
         LoopSample {
             sample,

@@ -275,6 +275,27 @@ impl Controller {
     /// One sample: the ADC's code in, the DAC's code out.
     #[inline]
     pub fn step(&self, st: &mut ControllerState, adc: AdcCode) -> Sample {
+        self.step_with_correction(st, adc, 0.0)
+    }
+
+    /// The present sample's index within the generator's repeat
+    /// ([`ReferenceGenerator::index`]): read before the step, it indexes a learned table.
+    #[inline]
+    pub fn reference_index(&self, st: &ControllerState) -> u32 {
+        self.generator.index(&st.generator)
+    }
+
+    /// [`Self::step`] with a learned correction ([`crate::learning`]) added, in closed loop
+    /// only, to the loop's reference after the pre-filter: it goes through the compensator,
+    /// its anti-windup and the output limits like the rest. A non-finite correction is a
+    /// [`Faults::NONFINITE`].
+    #[inline]
+    pub fn step_with_correction(
+        &self,
+        st: &mut ControllerState,
+        adc: AdcCode,
+        correction_v: f32,
+    ) -> Sample {
         let measured_v = adc.volts();
         self.check_sensor(st, adc, measured_v);
         if st.entering {
@@ -300,7 +321,8 @@ impl Controller {
                 Mode::ClosedLoop => {
                     let r_loop = self.prefilter.step(&mut st.prefilter, r_ahead);
                     let ff = self.feedforward(st, r_loop);
-                    self.lag.update_ff(&mut st.lag, r_loop - measured_v, ff)
+                    self.lag
+                        .update_ff(&mut st.lag, r_loop + correction_v - measured_v, ff)
                 }
                 Mode::OpenLoop => self.lag.limits.apply(last, r_now),
                 Mode::Hold | Mode::Safe => (last, Flags::HELD),

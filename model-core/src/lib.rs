@@ -28,6 +28,8 @@
 //! * [`drift`], [`gain`], [`amplifier`], [`sensor`]: the non-linear blocks of ch. 5.
 //! * [`stage`]: the ch. 6 overall model composed of all blocks (the wiring is stated there).
 //! * [`frame`]: the capture wire format (firmware encoder, host decoder).
+//! * [`learning`]: iterative learning control over the generator's repeat (the table the
+//!   interrupt reads, the update a task runs once per repeat).
 //! * [`closed_loop`]: the one closed-loop harness ([`controller::Controller::step`] around a
 //!   stage through the converters) that the QEMU [`scenarios`] and the host's loop and tracking
 //!   figures all run.
@@ -48,6 +50,7 @@ pub mod frame;
 pub mod gain;
 pub mod hysteresis;
 pub mod lag;
+pub mod learning;
 pub mod limits;
 pub mod params;
 pub mod plant;

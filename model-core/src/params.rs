@@ -157,6 +157,13 @@ pub const PREFILTER_TAU_MAX_S: f64 = 1e-3;
 /// Longest preview (reference advance) a generator offers, samples (our assumption: covers
 /// 4 tau + loop delay at the longest tau and the highest rate).
 pub const MAX_PREVIEW_SAMPLES: u32 = 1024;
+/// Longest repeat of the on-board generator, samples, and so the longest period the learning
+/// control learns (issue #14; our assumption: 82 ms at 50 kHz, a fundamental down to 12.2 Hz).
+/// One `f32` table of it is 16 KiB; the learning's five buffers (the table the interrupt
+/// reads, the one being computed, the error the interrupt records, the one being read, one
+/// scratch) are 80 KiB: they fit the H743's 128 KiB DTCM, not the AXI SRAM beside the
+/// 400 kB capture buffer (see `model_core::learning`).
+pub const MAX_LEARN_PERIOD_SAMPLES: u32 = 4096;
 /// Sensor monitor range, volts (E-509: 0..10 V for 0..12 um, sec. 2.4).
 pub const SENSOR_MIN_V: f64 = 0.0;
 /// Sensor monitor range, volts (E-509: 0..10 V for 0..12 um, sec. 2.4).

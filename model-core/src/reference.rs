@@ -126,6 +126,7 @@ pub struct ReferenceGenerator {
     ramp_per_sample: f32,
     ramp_len: u64,
     preview: u32,
+    repeat: u32,
 }
 
 /// One position of the generator.
@@ -142,6 +143,7 @@ struct Cursor {
 pub struct ReferenceState {
     now: Cursor,
     ahead: Cursor,
+    index: u32,
 }
 
 /// Increment in 2^-64 turns per sample for `f_hz` at period `t`: `f t 2^64`, for
@@ -190,11 +192,18 @@ impl ReferenceGenerator {
             ramp_per_sample: 0.0,
             ramp_len: 0,
             preview,
+            repeat: 0,
         };
         match c.shape {
-            Shape::Sine => {}
-            Shape::Triangle => g.kind = Kind::Triangle,
-            Shape::Square => g.kind = Kind::Square,
+            Shape::Sine => g.repeat = repeat(c.freq_hz, t),
+            Shape::Triangle => {
+                g.kind = Kind::Triangle;
+                g.repeat = repeat(c.freq_hz, t);
+            }
+            Shape::Square => {
+                g.kind = Kind::Square;
+                g.repeat = repeat(c.freq_hz, t);
+            }
             Shape::Step { at_s } => {
                 check_range("at_s", at_s, Included(0.0), Excluded(1e18 * t))?;
                 g.kind = Kind::Step;
@@ -242,6 +251,28 @@ impl ReferenceGenerator {
         self.preview
     }
 
+    /// Samples after which the reference repeats exactly (a whole number of its periods), 0
+    /// when it does not within [`params::MAX_LEARN_PERIOD_SAMPLES`] (a step, a ramp, a sweep,
+    /// a frequency whose period is not a ratio of small whole numbers of samples).
+    ///
+    /// ```
+    /// use model_core::reference::{ReferenceConfig, ReferenceGenerator, Shape};
+    /// let c = |f| ReferenceConfig { shape: Shape::Sine, freq_hz: f, ..ReferenceConfig::default() };
+    /// assert_eq!(ReferenceGenerator::new(&c(100.0), 0).unwrap().repeat_samples(), 500);
+    /// assert_eq!(ReferenceGenerator::new(&c(300.0), 0).unwrap().repeat_samples(), 500); // 3 periods
+    /// assert_eq!(ReferenceGenerator::new(&c(101.234567), 0).unwrap().repeat_samples(), 0);
+    /// ```
+    pub fn repeat_samples(&self) -> u32 {
+        self.repeat
+    }
+
+    /// The present sample's index within the repeat, `0..repeat_samples()` (0 without a
+    /// repeat): read it before [`Self::next`] to index a per-sample table.
+    #[inline]
+    pub fn index(&self, s: &ReferenceState) -> u32 {
+        s.index
+    }
+
     /// A state at the start (sample 0), its "ahead" cursor `preview` samples on.
     pub fn start(&self) -> ReferenceState {
         let now = Cursor {
@@ -253,7 +284,11 @@ impl ReferenceGenerator {
         for _ in 0..self.preview {
             self.advance(&mut ahead);
         }
-        ReferenceState { now, ahead }
+        ReferenceState {
+            now,
+            ahead,
+            index: 0,
+        }
     }
 
     #[inline]
@@ -321,8 +356,37 @@ impl ReferenceGenerator {
         let v = self.value(&s.ahead);
         self.advance(&mut s.now);
         self.advance(&mut s.ahead);
+        s.index += 1;
+        if s.index >= self.repeat {
+            s.index = 0;
+        }
         v
     }
+}
+
+/// Most periods [`repeat`] looks through for a whole number of samples (our assumption:
+/// covers frequencies whose period is a ratio `p/q` samples with `q <= 64`).
+const MAX_REPEAT_PERIODS: u32 = 64;
+
+/// The smallest whole number of samples that holds a whole number of periods of `f_hz` at
+/// period `t` (to 1e-9 of a sample per period), at most
+/// [`params::MAX_LEARN_PERIOD_SAMPLES`]; 0 if none. Design time.
+fn repeat(f_hz: f64, t: f64) -> u32 {
+    if f_hz <= 0.0 {
+        return 0;
+    }
+    let per_period = 1.0 / (f_hz * t);
+    for m in 1..=MAX_REPEAT_PERIODS {
+        let x = per_period * m as f64;
+        if x > params::MAX_LEARN_PERIOD_SAMPLES as f64 + 0.5 {
+            return 0;
+        }
+        let whole = (x + 0.5) as u32;
+        if (x - whole as f64).abs() <= 1e-9 * m as f64 && whole >= 2 {
+            return whole;
+        }
+    }
+    0
 }
 
 /// Fold a phase (turns scaled by 2^32) onto `x in [-1, 1]` with `sin(2 pi phase) =

@@ -17,12 +17,24 @@
 //! primed in open loop, then closed); after a warm-up of at least 0.2 s and 3 periods (the
 //! periodic steady state), the figures are taken over whole periods: at least 0.1 s and 2
 //! periods.
+//!
+//! # Learning (issue #14)
+//! With [`TrackSpec::learn_periods`] > 0, after the warm-up the loop runs on until the
+//! generator's repeat starts (index 0), then that many repeats with iterative learning
+//! control ([`model_core::learning`]): each sample reads the table at the generator's index
+//! and steps with the correction ([`ClosedLoop::step_with_correction`](model_core::closed_loop::ClosedLoop::step_with_correction)),
+//! records reference minus measurement, and at each repeat's end the update runs, as the
+//! board's task will. The figures are then measured as without learning, the table frozen
+//! in force; [`TrackRun::learn_rms_error_v`] holds each learning repeat's RMS error (true
+//! output, as the figures).
 use crate::io::checks::within;
 use crate::sim::closed_loop;
 use anyhow::{Context, bail};
-use model_core::controller::{Controller, ControllerConfig, ReferenceSource};
+use model_core::closed_loop::LoopSample;
+use model_core::controller::{Controller, ControllerConfig, Mode, ReferenceSource};
 use model_core::hysteresis::HysteresisTable;
 use model_core::lag::LagConfig;
+use model_core::learning::{self, Learning, LearningConfig, LearningState, Period, Status};
 use model_core::limits::Flags;
 use model_core::params;
 use model_core::plant::LinearPlantConfig;
@@ -68,6 +80,10 @@ pub struct TrackSpec {
     /// Add the hysteresis feedforward (the stage's own table if it has one, else the thesis
     /// default table).
     pub feedforward: bool,
+    /// Repeats of learning before the measurement (0: none, today's behaviour).
+    pub learn_periods: u32,
+    /// The learning's settings.
+    pub learning: LearningConfig,
 }
 
 impl TrackSpec {
@@ -94,7 +110,15 @@ impl TrackSpec {
             plant: LinearPlantConfig::default(),
             stage: StageConfig::thesis_linear(),
             feedforward: false,
+            learn_periods: 0,
+            learning: LearningConfig::default(),
         }
+    }
+
+    /// The same with `periods` repeats of learning before the measurement.
+    pub fn with_learning(mut self, periods: u32) -> Self {
+        self.learn_periods = periods;
+        self
     }
 
     /// The same on another stage.
@@ -177,6 +201,31 @@ pub struct TrackRun {
     pub preview_samples: u32,
     /// Recorded (time s, reference V, output V, command V) over the measured periods.
     pub trace: Vec<(f64, f64, f64, f64)>,
+    /// RMS error (reference minus true output) of each learning repeat, volts; empty without
+    /// learning.
+    pub learn_rms_error_v: Vec<f64>,
+    /// Learning's status after the last repeat (`None` without learning).
+    pub learn_status: Option<Status>,
+    /// Samples during the learning repeats that the window clamped or the slew limit held
+    /// back, and the command's range then, volts.
+    pub learn_limited_samples: usize,
+    /// Lowest and highest command during the learning repeats, volts.
+    pub learn_command_range_v: (f64, f64),
+}
+
+impl TrackRun {
+    /// What `piezo track --json` prints: the four [`TrackFigures`] keys, and
+    /// `learn_rms_error_v` (one value per learning repeat) only when learning ran.
+    pub fn json(&self) -> anyhow::Result<serde_json::Value> {
+        let mut v = serde_json::to_value(self.figures)?;
+        if let (false, Some(o)) = (self.learn_rms_error_v.is_empty(), v.as_object_mut()) {
+            o.insert(
+                "learn_rms_error_v".into(),
+                serde_json::to_value(&self.learn_rms_error_v)?,
+            );
+        }
+        Ok(v)
+    }
 }
 
 /// Checks the experiment; every refusal says why.
@@ -235,8 +284,25 @@ pub fn validate(spec: &TrackSpec) -> anyhow::Result<()> {
     PreFilter::new(&spec.lag, &spec.plant, &spec.prefilter).map_err(|e| {
         anyhow::anyhow!("invalid pre-filter (--tau {} s): {e}", spec.prefilter.tau_s)
     })?;
+    if spec.learn_periods > MAX_LEARN_PERIODS {
+        bail!(
+            "--learn is at most {MAX_LEARN_PERIODS} repeats, got {}",
+            spec.learn_periods
+        );
+    }
+    if spec.learn_periods > 0 {
+        Learning::new(&spec.learning, &spec.controller_config()).map_err(|e| {
+            anyhow::anyhow!(
+                "no learning for this reference ({e}): learning needs a period of a whole number of samples, or a few periods that make one, up to {} samples",
+                params::MAX_LEARN_PERIOD_SAMPLES
+            )
+        })?;
+    }
     Ok(())
 }
+
+/// Most learning repeats `simulate` runs.
+pub const MAX_LEARN_PERIODS: u32 = 10_000;
 
 /// Run one experiment; `record` keeps the trace of the measured periods.
 pub fn simulate(spec: &TrackSpec, record: bool) -> anyhow::Result<TrackRun> {
@@ -256,15 +322,21 @@ pub fn simulate(spec: &TrackSpec, record: bool) -> anyhow::Result<TrackRun> {
     let (mut u_lo, mut u_hi) = (f64::MAX, f64::MIN);
     let mut u_prev = lp.state.command_v() as f64;
     let mut trace = Vec::new();
-    for k in 0..warm + n {
-        let s = lp.step();
-        if !s.sample.faults.is_empty() {
-            bail!(
-                "the controller latched a fault ({:?}) at {:.4} s: the loop does not run on this stage",
-                s.sample.faults,
-                k as f64 * t
-            );
+    let mut learn = Learned::default();
+    let mut table = Vec::new();
+    if spec.learn_periods > 0 {
+        for k in 0..warm {
+            let s = lp.step();
+            check_faults(&s, k, t)?;
         }
+        learn = learn_repeats(spec, &cfg, &mut lp, &mut table, warm)?;
+        u_prev = lp.state.command_v() as f64;
+    }
+    let start = if spec.learn_periods > 0 { warm } else { 0 };
+    for k in start..warm + n {
+        let i = controller.reference_index(&lp.state);
+        let s = lp.step_with_correction(learning::correction(&table, i));
+        check_faults(&s, k, t)?;
         let u = s.sample.command_v as f64;
         if k >= warm {
             let (r, y) = (s.sample.reference_v as f64, s.output_v as f64);
@@ -294,7 +366,86 @@ pub fn simulate(spec: &TrackSpec, record: bool) -> anyhow::Result<TrackRun> {
         command_range_v: (u_lo, u_hi),
         preview_samples: controller.prefilter.preview_samples(),
         trace,
+        learn_rms_error_v: learn.rms_v,
+        learn_status: learn.status,
+        learn_limited_samples: learn.limited,
+        learn_command_range_v: learn.command_range_v,
     })
+}
+
+fn check_faults(s: &LoopSample, k: usize, t: f64) -> anyhow::Result<()> {
+    if !s.sample.faults.is_empty() {
+        bail!(
+            "the controller latched a fault ({:?}) at {:.4} s: the loop does not run on this stage",
+            s.sample.faults,
+            k as f64 * t
+        );
+    }
+    Ok(())
+}
+
+/// What the learning repeats left.
+#[derive(Default)]
+struct Learned {
+    rms_v: Vec<f64>,
+    status: Option<Status>,
+    limited: usize,
+    command_range_v: (f64, f64),
+}
+
+/// Run on to the start of the generator's repeat, then `spec.learn_periods` repeats of
+/// learning, updating `table` (sized here) at the end of each, as the board's task will.
+fn learn_repeats(
+    spec: &TrackSpec,
+    cfg: &ControllerConfig,
+    lp: &mut closed_loop::StageLoop,
+    table: &mut Vec<f32>,
+    mut k: usize,
+) -> anyhow::Result<Learned> {
+    let t = spec.lag.period_s;
+    let l = Learning::new(&spec.learning, cfg).map_err(|e| anyhow::anyhow!("learning: {e}"))?;
+    let n = l.period_samples() as usize;
+    *table = vec![0.0f32; n];
+    let (mut error, mut scratch) = (vec![0.0f32; n], vec![0.0f32; n]);
+    let mut st = LearningState::new();
+    let controller = lp.controller;
+    // Bounded: the index returns to 0 within one repeat.
+    while controller.reference_index(&lp.state) != 0 {
+        let s = lp.step();
+        check_faults(&s, k, t)?;
+        k += 1;
+    }
+    let mut out = Learned {
+        command_range_v: (f64::MAX, f64::MIN),
+        ..Learned::default()
+    };
+    for _ in 0..spec.learn_periods {
+        let mut sum2 = 0.0f64;
+        for _ in 0..n {
+            let i = controller.reference_index(&lp.state);
+            let s = lp.step_with_correction(learning::correction(table, i));
+            check_faults(&s, k, t)?;
+            k += 1;
+            learning::record(&mut error, i, &s.sample);
+            let e = s.error_v() as f64;
+            sum2 += e * e;
+            let u = s.sample.command_v as f64;
+            out.command_range_v = (out.command_range_v.0.min(u), out.command_range_v.1.max(u));
+            out.limited += s
+                .sample
+                .flags
+                .contains(Flags::CLAMPED | Flags::SLEW_LIMITED) as usize;
+        }
+        out.rms_v.push((sum2 / n as f64).sqrt());
+        let period = Period {
+            error_v: &error,
+            faults: lp.state.faults(),
+            closed_loop: lp.state.mode() == Mode::ClosedLoop,
+            generator: &lp.controller.generator,
+        };
+        out.status = Some(l.update(&mut st, table, &mut scratch, &period));
+    }
+    Ok(out)
 }
 
 /// Draw reference, output (top) and error (bottom) of a recorded trace to an SVG file.
@@ -354,6 +505,41 @@ fn draw(tr: &[(f64, f64, f64, f64)], title: &str, path: &std::path::Path) -> any
         tr.iter().map(|s| (ms(s.0), (s.1 - s.2) * 1e3)),
         &BLACK,
     ))?;
+    root.present().context("writing the SVG")?;
+    Ok(())
+}
+
+/// Draw the RMS error of each learning repeat (log scale, mV) to an SVG file.
+pub fn plot_learning(rms_v: &[f64], title: &str, path: &std::path::Path) -> anyhow::Result<()> {
+    use plotters::prelude::*;
+    if rms_v.is_empty() {
+        bail!("no learning repeat to plot");
+    }
+    let mv: Vec<f64> = rms_v.iter().map(|v| (v * 1e3).max(1e-3)).collect();
+    let (lo, hi) = mv
+        .iter()
+        .fold((f64::MAX, f64::MIN), |(a, b), &v| (a.min(v), b.max(v)));
+    let root = SVGBackend::new(path, (800, 500)).into_drawing_area();
+    root.fill(&WHITE)?;
+    let mut c = ChartBuilder::on(&root)
+        .caption(title, ("sans-serif", 18))
+        .margin(10)
+        .x_label_area_size(30)
+        .y_label_area_size(60)
+        .build_cartesian_2d(0.0..mv.len() as f64, (lo * 0.5..hi * 2.0).log_scale())?;
+    c.configure_mesh()
+        .x_desc("learning repeat")
+        .y_desc("RMS error, mV")
+        .draw()?;
+    c.draw_series(LineSeries::new(
+        mv.iter().enumerate().map(|(k, &v)| (k as f64 + 1.0, v)),
+        &BLUE,
+    ))?;
+    c.draw_series(
+        mv.iter()
+            .enumerate()
+            .map(|(k, &v)| Circle::new((k as f64 + 1.0, v), 3, BLUE.filled())),
+    )?;
     root.present().context("writing the SVG")?;
     Ok(())
 }

@@ -3,7 +3,8 @@
 
 use clap::{Args, ValueEnum};
 use host_tests::io::model_file::ModelFile;
-use host_tests::sim::tracking::{TrackShape, TrackSpec, plot, simulate};
+use host_tests::sim::tracking::{TrackShape, TrackSpec, plot, plot_learning, simulate};
+use model_core::learning::LearningConfig;
 use model_core::params;
 use model_core::prefilter::PreFilterMode;
 
@@ -86,6 +87,19 @@ pub struct TrackArgs {
     /// Hysteresis feedforward: on adds it (with the model's hysteresis table if it has one).
     #[arg(long, value_enum, default_value_t = FfArg::Off)]
     pub ff: FfArg,
+    /// Repeats of iterative learning before the measurement (0: none). Each repeat is one
+    /// period of the reference, or the few periods that make a whole number of samples.
+    #[arg(long, default_value_t = 0)]
+    pub learn: u32,
+    /// Cut-off of the learning's robustness filter, Hz.
+    #[arg(long, default_value_t = LearningConfig::default().cutoff_hz)]
+    pub learn_cutoff: f64,
+    /// Time constant of the learning filter's planning poles, seconds.
+    #[arg(long, default_value_t = LearningConfig::default().tau_s)]
+    pub learn_tau: f64,
+    /// Learning gain, in (0, 1].
+    #[arg(long, default_value_t = LearningConfig::default().gain)]
+    pub learn_gain: f64,
     /// Print one JSON object instead of a table.
     #[arg(long)]
     pub json: bool,
@@ -107,7 +121,17 @@ pub fn run(a: &TrackArgs) -> anyhow::Result<()> {
     )
     .with_tau(a.tau)
     .with_stage(model.stage_config()?)
-    .with_feedforward(a.ff == FfArg::On);
+    .with_feedforward(a.ff == FfArg::On)
+    .with_learning(a.learn);
+    let spec = TrackSpec {
+        learning: LearningConfig {
+            cutoff_hz: a.learn_cutoff,
+            gain: a.learn_gain,
+            tau_s: a.learn_tau,
+            ..spec.learning
+        },
+        ..spec
+    };
     let r = simulate(&spec, a.plot.is_some())?;
     if let Some(path) = &a.plot {
         // The last two periods of the measured ones.
@@ -117,6 +141,15 @@ pub fn run(a: &TrackArgs) -> anyhow::Result<()> {
             a.shape, a.freq, a.amplitude, a.prefilter, a.ff, a.model
         );
         plot(&r.trace[r.trace.len() - keep..], &title, path)?;
+        if !r.learn_rms_error_v.is_empty() {
+            let learn_path = path.with_extension("learn.svg");
+            let title = format!(
+                "{:?} {} Hz, {}: RMS error per learning repeat",
+                a.shape, a.freq, a.model
+            );
+            plot_learning(&r.learn_rms_error_v, &title, &learn_path)?;
+            eprintln!("convergence drawn to {}", learn_path.display());
+        }
     }
     let f = r.figures;
     for (name, v) in [
@@ -127,7 +160,7 @@ pub fn run(a: &TrackArgs) -> anyhow::Result<()> {
         host_tests::io::checks::finite(name, v)?;
     }
     if a.json {
-        println!("{}", serde_json::to_string(&f)?);
+        println!("{}", serde_json::to_string(&r.json()?)?);
         return Ok(());
     }
     println!(
@@ -144,6 +177,18 @@ pub fn run(a: &TrackArgs) -> anyhow::Result<()> {
         "stage `{}`, hysteresis feedforward {:?}, 1 mV sensor noise",
         model.name, a.ff
     );
+    if let (Some(first), Some(last)) = (r.learn_rms_error_v.first(), r.learn_rms_error_v.last()) {
+        println!(
+            "learning: {} repeats, RMS error {:.3} -> {:.3} mV, status {:?}; {} samples limited, command {:.3} .. {:.3} V",
+            r.learn_rms_error_v.len(),
+            first * 1e3,
+            last * 1e3,
+            r.learn_status,
+            r.learn_limited_samples,
+            r.learn_command_range_v.0,
+            r.learn_command_range_v.1
+        );
+    }
     println!("{:<28}{:>14.3} mV", "RMS error", f.rms_error_v * 1e3);
     println!("{:<28}{:>14.3} mV", "peak error", f.max_error_v * 1e3);
     println!(
