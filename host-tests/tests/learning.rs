@@ -310,3 +310,55 @@ fn learning_brings_the_100_hz_sine_on_thesis_full_under_2_mv_in_30_repeats() {
     let v0 = before.json().unwrap();
     assert_eq!(v0.as_object().unwrap().len(), 4);
 }
+
+/// A stage off the design model: the learning filter is designed on `thesis-linear` (the
+/// controller's design plant), the stage is `thesis-full` with its amplifier gain scaled by
+/// `gain`, its delay moved by `delay_s` and its mode scaled by `mode` (issue #14, item 5).
+fn off_model(gain: f64, delay_s: f64, mode: f64) -> StageConfig {
+    let mut s = StageConfig::thesis_full();
+    s.amplifier.gain *= gain;
+    s.delay_s += delay_s;
+    s.mode.mode_hz *= mode;
+    s
+}
+
+#[test]
+fn learning_converges_on_stages_off_by_gain_delay_and_mode() {
+    // Gain -30 % cannot reach 7 V inside the 0..10 V window (7 V / (0.79 * 0.7) = 12.7 V):
+    // that corner runs 1..5 V (4 V p-p around 3 V), every other one 6 V p-p around 4 V.
+    let corners: [(&str, f64, f64, f64); 7] = [
+        ("nominal", 1.0, 0.0, 1.0),
+        ("gain +30 %", 1.3, 0.0, 1.0),
+        ("gain -30 %", 0.7, 0.0, 1.0),
+        ("delay +20 us", 1.0, 20e-6, 1.0),
+        ("delay -20 us", 1.0, -20e-6, 1.0),
+        ("mode +15 %", 1.0, 0.0, 1.15),
+        ("mode -15 %", 1.0, 0.0, 0.85),
+    ];
+    println!("100 Hz on thesis-full off the design model, 30 repeats; RMS / peak, mV");
+    for (shape_name, shape) in [
+        ("sine", TrackShape::Sine),
+        ("triangle", TrackShape::Triangle),
+    ] {
+        for (name, gain, delay_s, mode) in corners {
+            let (amp, off) = if gain < 1.0 { (2.0, 3.0) } else { (3.0, 4.0) };
+            let spec = TrackSpec::new(shape, 100.0, amp, off, PreFilterMode::Full)
+                .with_stage(off_model(gain, delay_s, mode));
+            let before = simulate(&spec, false).unwrap().figures;
+            let r = simulate(&spec.with_learning(30), false).unwrap();
+            let cut = before.rms_error_v / r.figures.rms_error_v;
+            println!(
+                "{shape_name:<9}{name:<14} {:>7.2} / {:>7.2} -> {:>6.2} / {:>6.2}  ({cut:>5.1}x) {:?}",
+                before.rms_error_v * 1e3,
+                before.max_error_v * 1e3,
+                r.figures.rms_error_v * 1e3,
+                r.figures.max_error_v * 1e3,
+                r.learn_status
+            );
+            assert!(cut >= 10.0, "{shape_name} {name}: only {cut:.1}x");
+            assert_eq!(r.learn_limited_samples, 0, "{shape_name} {name}");
+            assert!(r.learn_command_range_v.0 >= 0.0 && r.learn_command_range_v.1 <= 10.0);
+            assert_eq!(r.slew_limited_fraction, 0.0, "{shape_name} {name}");
+        }
+    }
+}
