@@ -80,6 +80,9 @@ pub fn bench_description(name: &str) -> &'static str {
             "`Controller::step`, closed loop, on-board generator + pre-filter: ADC code to DAC code (the ISR's maths)"
         }
         "controller_step_hysteresis_ff" => "the same with hysteresis feedforward on",
+        "controller_step_learning" => {
+            "the same with the learning's read-and-add and error record (`learning::correction`, `step_with_correction`, `learning::record`)"
+        }
         "controller_step_external_no_prefilter" => {
             "`Controller::step`, external reference, pre-filter off"
         }

@@ -28,6 +28,7 @@ mod image {
     use model_core::hysteresis::{HysteresisMemory, HysteresisTable};
     use model_core::lag::LagConfig;
     use model_core::lag::{LagCompensator, LagState};
+    use model_core::learning;
     use model_core::limits::{Flags, OutputLimits};
     use model_core::plant::LinearPlantConfig;
     use model_core::plant::{LinearPlant, PlantState};
@@ -57,6 +58,22 @@ mod image {
     #[inline(never)]
     fn controller_step(c: &Controller, s: &mut ControllerState, adc: AdcCode) -> Sample {
         c.step(s, adc)
+    }
+
+    /// The interrupt's learning path (issue #14): the generator's index, the table's
+    /// correction read and added, the step, the error recorded.
+    #[inline(never)]
+    fn controller_step_learning(
+        c: &Controller,
+        s: &mut ControllerState,
+        adc: AdcCode,
+        table: &[f32],
+        error_v: &mut [f32],
+    ) -> Sample {
+        let index = c.reference_index(s);
+        let sample = c.step_with_correction(s, adc, learning::correction(table, index));
+        learning::record(error_v, index, &sample);
+        sample
     }
 
     #[inline(never)]
@@ -196,6 +213,22 @@ mod image {
             black_box(controller_step(&controller, &mut s, black_box(rec.adc[i])));
         });
         report("controller_step", ticks);
+
+        // The same with the learning's read-and-add and record (one 100 Hz repeat: 500
+        // samples at 50 kHz).
+        let table = [0.001f32; 500];
+        let mut error_v = [0.0f32; 500];
+        let mut s = st0.clone();
+        let ticks = time(&counter, |i| {
+            black_box(controller_step_learning(
+                &controller,
+                &mut s,
+                black_box(rec.adc[i]),
+                black_box(&table),
+                &mut error_v,
+            ));
+        });
+        report("controller_step_learning", ticks);
 
         // Other configurations of the same function, each warmed up on the recorded codes
         // first (entering closed loop is a one-off cost, not counted).
