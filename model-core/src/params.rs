@@ -205,6 +205,9 @@ pub const FAST_GAIN_U_RANGE_V: (f64, f64) = (0.0, 10.0);
 /// Sensor gain of the stage model, monitor volts per volt of position (1: the plant's 0.79
 /// already maps to monitor volts; our assumption).
 pub const SENSOR_GAIN: f64 = 1.0;
+/// Offset of the stage model's sensor monitor, volts (0: a calibrated monitor reads 0 V at
+/// zero position; our assumption. A real record's offset is the model-gap effect `offset`).
+pub const SENSOR_OFFSET_V: f64 = 0.0;
 /// Default seed of the sensor noise generator (any value; our assumption).
 pub const SENSOR_NOISE_SEED: u64 = 0x005E_ED0F_E509;
 

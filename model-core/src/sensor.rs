@@ -1,10 +1,13 @@
 //! The E-509 sensor monitor and the converters, as the stage model sees them (sec. 2.3.1, 2.4).
 //!
 //! ```text
-//! position (V) ─► x gain ─► + noise ─► 16-bit ADC (+-10 V) ─► y (V)
+//! position (V) ─► x gain ─► + offset ─► + noise ─► 16-bit ADC (+-10 V) ─► y (V)
 //! ```
 //! * **Gain**: monitor volts per volt of position (1 by default: the plant's 0.79 already maps
-//!   the amplifier input to monitor volts).
+//!   the amplifier input to monitor volts). A scale error of a real monitor is a gain other
+//!   than 1 (the model-gap workflow's effect `sensor-gain`).
+//! * **Offset**: a constant added to the monitor reading, volts (0 by default,
+//!   [`params::SENSOR_OFFSET_V`]): the monitor's or the ADC's zero error (effect `offset`).
 //! * **Noise**: the thesis quotes about +-2.5 mV ([`params::SENSOR_NOISE_V`]); we draw it from
 //!   a seeded generator so that every record is reproducible. The generator is SplitMix64 (one
 //!   64-bit add, three xor-shifts and two multiplies; passes BigCrush), small enough for
@@ -27,6 +30,8 @@ use crate::params;
 pub struct SensorConfig {
     /// Monitor volts per volt of position.
     pub gain: f64,
+    /// Constant added to the monitor reading, volts (within +-10 V).
+    pub offset_v: f64,
     /// Noise standard deviation, volts (0 for none).
     pub noise_v: f64,
     /// Quantise to the 16-bit ADC.
@@ -36,10 +41,11 @@ pub struct SensorConfig {
 }
 
 impl Default for SensorConfig {
-    /// Gain 1, the thesis' 2.5 mV noise, ADC on.
+    /// Gain 1, no offset, the thesis' 2.5 mV noise, ADC on.
     fn default() -> Self {
         Self {
             gain: params::SENSOR_GAIN,
+            offset_v: params::SENSOR_OFFSET_V,
             noise_v: params::SENSOR_NOISE_V,
             adc: true,
             seed: params::SENSOR_NOISE_SEED,
@@ -85,6 +91,7 @@ impl SplitMix64 {
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Sensor {
     gain: f32,
+    offset_v: f32,
     noise_v: f32,
     adc: bool,
     seed: u64,
@@ -97,7 +104,7 @@ pub struct SensorState {
 }
 
 impl Sensor {
-    /// Checks `cfg`: gain within 0.1..10, noise within 0..1 V.
+    /// Checks `cfg`: gain within 0.1..10, offset within +-10 V, noise within 0..1 V.
     ///
     /// ```
     /// use model_core::sensor::{Sensor, SensorConfig};
@@ -108,9 +115,11 @@ impl Sensor {
     /// ```
     pub fn new(cfg: &SensorConfig) -> Result<Self, ConfigError> {
         check_within("gain", cfg.gain, 0.1, 10.0)?;
+        check_within("offset_v", cfg.offset_v, -10.0, 10.0)?;
         check_within("noise_v", cfg.noise_v, 0.0, 1.0)?;
         Ok(Self {
             gain: cfg.gain as f32,
+            offset_v: cfg.offset_v as f32,
             noise_v: cfg.noise_v as f32,
             adc: cfg.adc,
             seed: cfg.seed,
@@ -127,7 +136,7 @@ impl Sensor {
     /// The monitor reading for `position_v`. Draws one noise sample only when noise is on.
     #[inline]
     pub fn measure(&self, s: &mut SensorState, position_v: f32) -> f32 {
-        let mut y = self.gain * position_v;
+        let mut y = self.gain * position_v + self.offset_v;
         if self.noise_v > 0.0 {
             y += self.noise_v * s.rng.standard_normal();
         }

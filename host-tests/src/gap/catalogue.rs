@@ -9,7 +9,8 @@
 //!   whole current model plus the candidate;
 //! * **slow effects** (`drift`, `hysteresis`, `nonlinear-gain`) add a term to the quasi-static
 //!   displacement that is linear in their weights given a few shape constants (drift time
-//!   constants, play thresholds). They are fitted together, by one weighted least-squares
+//!   constants, play thresholds); the sensor's `sensor-gain` (scale error: the residual is
+//!   proportional to the simulated output) and `offset` (a constant) are linear outright. They are fitted together, by one weighted least-squares
 //!   solve on the settled samples of all records (time constants chosen from a log grid by the
 //!   same solve), so an effect already in the model is refitted with the new one.
 //!
@@ -17,13 +18,13 @@
 //! every record by [`model_core::stage::Stage`] (never by a second simulator) and scored.
 
 use crate::io::model_file::{
-    DelaySection, DriftSection, GainSection, ModelFile, PlaySection, PoleSection, ResonanceSection,
-    SaturationSection, SlewSection,
+    DelaySection, DriftSection, GainSection, ModelFile, OffsetSection, PlaySection, PoleSection,
+    ResonanceSection, SaturationSection, SensorGainSection, SlewSection,
 };
 use model_core::params;
 
 /// The catalogued effects, in the order the tables list them (the names are a contract).
-pub const EFFECTS: [&str; 8] = [
+pub const EFFECTS: [&str; 10] = [
     "time-delay",
     "amplifier-pole",
     "resonance",
@@ -32,10 +33,18 @@ pub const EFFECTS: [&str; 8] = [
     "nonlinear-gain",
     "slew-rate-limit",
     "saturation",
+    "sensor-gain",
+    "offset",
 ];
 
-/// The slow effects (fitted by least squares).
-pub const SLOW: [&str; 3] = ["drift", "hysteresis", "nonlinear-gain"];
+/// The slow effects (fitted together by one least-squares solve).
+pub const SLOW: [&str; 5] = [
+    "drift",
+    "hysteresis",
+    "nonlinear-gain",
+    "sensor-gain",
+    "offset",
+];
 
 /// The fast effects (fitted by a bounded search on the fast records).
 pub const FAST: [&str; 5] = [
@@ -52,6 +61,53 @@ pub const DRIFT_TAU_GRID_S: [f64; 14] = [
     0.005, 0.01, 0.02, 0.05, 0.1, 0.2, 0.5, 1.0, 2.0, 5.0, 10.0, 20.0, 50.0, 200.0,
 ];
 
+/// Play-operator thresholds the hysteresis fit chooses from, volts at the amplifier input
+/// (geometric, ratio 1.41, 30 mV..5 V; our assumption: the sign-constrained solve picks a few
+/// of them, so a truth whose operators have other radii than any fixed set, such as
+/// `model_core::params::PLAY_RADII_V`, is still matched; adjacent grid radii differ little
+/// enough that merging two of them into one operator ([`reduce_play`]) changes a loop by a
+/// small fraction of their weight).
+pub const PLAY_GRID_V: [f64; 16] = [
+    0.03, 0.042, 0.06, 0.084, 0.12, 0.17, 0.24, 0.33, 0.47, 0.66, 0.93, 1.3, 1.85, 2.6, 3.7, 5.0,
+];
+
+/// The grid's weights as the stage's [`params::PLAY_OPERATORS`] operators (radii, weights):
+/// the operators with a non-zero weight, the two closest in radius merged while there are too
+/// many (weight summed, radius the weight-averaged one, which keeps the loop's height on a
+/// large cycle, `2 sum w r`); unused operators get weight 0 and the default radii.
+pub fn reduce_play(
+    grid_w: &[f64],
+) -> ([f64; params::PLAY_OPERATORS], [f64; params::PLAY_OPERATORS]) {
+    let mut ops: Vec<(f64, f64)> = PLAY_GRID_V
+        .iter()
+        .zip(grid_w)
+        .filter(|(_, w)| **w != 0.0)
+        .map(|(r, w)| (*r, *w))
+        .collect();
+    while ops.len() > params::PLAY_OPERATORS {
+        let k = (0..ops.len() - 1)
+            .min_by(|&a, &b| (ops[a + 1].0 / ops[a].0).total_cmp(&(ops[b + 1].0 / ops[b].0)))
+            .unwrap_or(0);
+        let (r1, w1) = ops[k];
+        let (r2, w2) = ops[k + 1];
+        let w = w1 + w2;
+        let r = if w != 0.0 {
+            (w1 * r1 + w2 * r2) / w
+        } else {
+            0.5 * (r1 + r2)
+        };
+        ops[k] = (r.clamp(r1.min(r2), r1.max(r2)), w);
+        ops.remove(k + 1);
+    }
+    let mut radii = params::PLAY_RADII_V;
+    let mut weights = [0.0; params::PLAY_OPERATORS];
+    for (i, (r, w)) in ops.into_iter().enumerate() {
+        radii[i] = r;
+        weights[i] = w;
+    }
+    (radii, weights)
+}
+
 /// Is `effect` present in `m`?
 pub fn present(m: &ModelFile, effect: &str) -> bool {
     match effect {
@@ -63,6 +119,8 @@ pub fn present(m: &ModelFile, effect: &str) -> bool {
         "nonlinear-gain" => m.nonlinear_gain.is_some(),
         "slew-rate-limit" => m.slew_rate_limit.is_some(),
         "saturation" => m.saturation.is_some(),
+        "sensor-gain" => m.sensor_gain.is_some(),
+        "offset" => m.offset.is_some(),
         _ => false,
     }
 }
@@ -85,6 +143,8 @@ pub fn without_slow(m: &ModelFile) -> ModelFile {
     m.drift = None;
     m.hysteresis_play = None;
     m.nonlinear_gain = None;
+    m.sensor_gain = None;
+    m.offset = None;
     m
 }
 
@@ -103,6 +163,8 @@ pub fn without(m: &ModelFile, effect: &str) -> ModelFile {
         "nonlinear-gain" => m.nonlinear_gain = None,
         "slew-rate-limit" => m.slew_rate_limit = None,
         "saturation" => m.saturation = None,
+        "sensor-gain" => m.sensor_gain = None,
+        "offset" => m.offset = None,
         _ => {}
     }
     m
@@ -124,6 +186,8 @@ pub fn revert(m: &ModelFile, base: &ModelFile, effect: &str) -> ModelFile {
         "nonlinear-gain" => m.nonlinear_gain = base.nonlinear_gain.clone(),
         "slew-rate-limit" => m.slew_rate_limit = base.slew_rate_limit.clone(),
         "saturation" => m.saturation = base.saturation.clone(),
+        "sensor-gain" => m.sensor_gain = base.sensor_gain.clone(),
+        "offset" => m.offset = base.offset.clone(),
         _ => {}
     }
     m
@@ -162,7 +226,8 @@ pub fn params_of(m: &ModelFile, effect: &str) -> Vec<(String, f64)> {
             h.radii_v
                 .iter()
                 .zip(&h.weights)
-                .map(|(r, w)| (format!("w_r{r}v"), *w))
+                .filter(|(_, w)| **w != 0.0)
+                .map(|(r, w)| (format!("w_r{r:.3}v"), *w))
                 .collect()
         }),
         "nonlinear-gain" => m.nonlinear_gain.as_ref().map_or(vec![], |g| {
@@ -179,6 +244,14 @@ pub fn params_of(m: &ModelFile, effect: &str) -> Vec<(String, f64)> {
             .saturation
             .as_ref()
             .map_or(vec![], |s| one("output_max_v", s.output_range_v[1])),
+        "sensor-gain" => m
+            .sensor_gain
+            .as_ref()
+            .map_or(vec![], |g| one("gain", g.gain)),
+        "offset" => m
+            .offset
+            .as_ref()
+            .map_or(vec![], |o| one("offset_v", o.offset_v)),
         _ => vec![],
     }
 }
@@ -257,12 +330,16 @@ pub fn fast_value(m: &ModelFile, effect: &str) -> Option<(f64, f64)> {
 pub struct SlowParams {
     /// Drift: (gains, taus).
     pub drift: Option<([f64; 3], [f64; 3])>,
-    /// Play weights.
-    pub hysteresis: Option<[f64; params::PLAY_OPERATORS]>,
+    /// Play operators: (radii, weights).
+    pub hysteresis: Option<([f64; params::PLAY_OPERATORS], [f64; params::PLAY_OPERATORS])>,
     /// K'(u) = 1 + c1 u + c2 u^2.
     pub gain: Option<(f64, f64)>,
     /// The drift's K(u), lowest power first (`None`: K = 1).
     pub drift_poly: Option<[f64; 4]>,
+    /// The sensor's scale error (factor on the nominal sensor gain).
+    pub sensor_gain: Option<f64>,
+    /// The sensor's offset, volts.
+    pub offset_v: Option<f64>,
 }
 
 /// `m` (without its slow effects) with the slow effects `p`; `u_range` is the inputs' span
@@ -277,9 +354,9 @@ pub fn with_slow(m: &ModelFile, p: &SlowParams, u_range: (f64, f64)) -> Option<M
             poly_range_v: [u_range.0, u_range.1],
         });
     }
-    if let Some(w) = p.hysteresis {
+    if let Some((radii_v, w)) = p.hysteresis {
         m.hysteresis_play = Some(PlaySection {
-            radii_v: params::PLAY_RADII_V,
+            radii_v,
             weights: w,
         });
     }
@@ -288,6 +365,12 @@ pub fn with_slow(m: &ModelFile, p: &SlowParams, u_range: (f64, f64)) -> Option<M
             poly: [1.0, c1, c2],
             range_v: [u_range.0, u_range.1],
         });
+    }
+    if let Some(gain) = p.sensor_gain {
+        m.sensor_gain = Some(SensorGainSection { gain });
+    }
+    if let Some(offset_v) = p.offset_v {
+        m.offset = Some(OffsetSection { offset_v });
     }
     m.build_stage().ok().map(|_| m)
 }

@@ -51,3 +51,18 @@ pub const MIN_SAMPLES: usize = 200;
 pub const FAST_RATE_HZ: f64 = 5_000.0;
 /// Samples within this time after an input jump are not used by the slow-effect solve.
 pub const SETTLE_S: f64 = 5e-3;
+/// An input that moves back by at least this much after an extreme has reversed, volts (our
+/// assumption: 20x the 14-bit DAC's step and well above a record's noise on `u`, far below
+/// the smallest loop worth a plot).
+pub const REVERSAL_MIN_V: f64 = 0.1;
+/// An input change into a sample is a jump (an edge) if it exceeds this, volts (the earlier
+/// fixed bar: 20 mV) ...
+pub const JUMP_MIN_V: f64 = 0.02;
+/// ... and this many times the changes on either side (our assumption: a 1 Hz sine of 4.5 V
+/// amplitude sampled at 1 kHz changes by 28 mV per sample, each like its neighbours, and is no
+/// edge; a step's neighbours do not move).
+pub const JUMP_RATIO: f64 = 4.0;
+/// Drift time constants are kept within this many times the longest record's length (our
+/// assumption: a lag of 400 s on a 10 s sine record moved by a few per cent and took the part
+/// of a sensor offset; thesis-full's 12 s lag sits well inside 2x a 20..150 s slow record).
+pub const DRIFT_TAU_MAX_RECORDS: f64 = 2.0;

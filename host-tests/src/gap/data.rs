@@ -2,11 +2,13 @@
 //! that moves), their noise floor (step 2 of the loop in [`super`]), and the noise-free
 //! simulation of a model on them (step 1).
 //!
-//! The noise floor is the median absolute second difference of `y`, scaled to the standard
-//! deviation of white noise (`1.4826 MAD / sqrt(6)`), on the samples at least 10 ms after the
-//! last input change when there are enough of them, so ringing after edges does not count.
+//! The noise floor is the median absolute k-th difference of `y`, scaled to the standard
+//! deviation of white noise (`1.4826 MAD / sqrt(C(2k, k))`), the smallest of k = 2, 3, 4 (a
+//! smooth signal inflates the low orders: no holds are assumed), on the samples at least 10 ms
+//! after the last input change when there are enough of them, so ringing after edges does not
+//! count.
 
-use super::constants::{FAST_RATE_HZ, MIN_SAMPLES};
+use super::constants::{FAST_RATE_HZ, JUMP_MIN_V, JUMP_RATIO, MIN_SAMPLES, REVERSAL_MIN_V};
 use crate::io::csv::Record;
 use crate::io::model_file::ModelFile;
 use crate::sim::open_loop::simulate;
@@ -69,6 +71,47 @@ impl Data {
         self.t_s.len()
     }
 
+    /// Is the input's change into sample `i` a jump (an edge the dynamics must settle from)?
+    /// More than [`JUMP_MIN_V`] and more than [`JUMP_RATIO`] times the changes on either side:
+    /// a step is a jump whatever the rate, a sine or a ramp sampled coarsely is not (each of
+    /// its changes is like its neighbours).
+    pub fn is_jump(&self, i: usize) -> bool {
+        if i == 0 || i >= self.u_v.len() {
+            return false;
+        }
+        let du = |k: usize| {
+            if k == 0 || k >= self.u_v.len() {
+                0.0
+            } else {
+                (self.u_v[k] - self.u_v[k - 1]).abs()
+            }
+        };
+        let d = du(i);
+        d > JUMP_MIN_V && d > JUMP_RATIO * du(i - 1).max(du(i + 1))
+    }
+
+    /// Number of reversals of the input: changes of direction after a move of at least
+    /// [`REVERSAL_MIN_V`] (a record with reversals shows hysteresis as a loop).
+    pub fn reversals(&self) -> usize {
+        let mut count = 0;
+        let mut dir = 0.0f64;
+        let mut extreme = self.u_v[0];
+        for &u in &self.u_v {
+            let d = u - extreme;
+            if dir >= 0.0 && d > 0.0 || dir <= 0.0 && d < 0.0 {
+                extreme = u;
+                if dir == 0.0 && d.abs() >= REVERSAL_MIN_V {
+                    dir = d.signum();
+                }
+            } else if d.abs() >= REVERSAL_MIN_V {
+                count += 1;
+                dir = d.signum();
+                extreme = u;
+            }
+        }
+        count
+    }
+
     /// Never empty (checked on construction).
     pub fn is_empty(&self) -> bool {
         self.t_s.is_empty()
@@ -89,7 +132,8 @@ pub fn mse(a: &[f64], b: &[f64]) -> f64 {
     a.iter().zip(b).map(|(x, y)| (x - y) * (x - y)).sum::<f64>() / n as f64
 }
 
-/// Noise floor of a record, volts: robust standard deviation of its second differences.
+/// Noise floor of a record, volts: robust standard deviation of its second, third or fourth
+/// differences (the smallest estimate), on quiet samples when there are enough.
 #[allow(clippy::needless_range_loop)] // several arrays indexed together
 pub fn noise_floor(d: &Data) -> f64 {
     let n = d.len();
@@ -102,17 +146,29 @@ pub fn noise_floor(d: &Data) -> f64 {
         }
         since[i] = last_change.map_or(usize::MAX, |c| i - c);
     }
-    let second = |quiet: bool| -> Vec<f64> {
-        (2..n)
-            .filter(|&i| !quiet || since[i - 2] >= settle)
-            .map(|i| (d.y_v[i] - 2.0 * d.y_v[i - 1] + d.y_v[i - 2]).abs())
+    // k-th differences of y: white noise of variance s^2 gives variance C(2k, k) s^2; a smooth
+    // signal (a sine, a ramp, a drift) adds (w dt)^k of itself, so the smallest of the k = 2,
+    // 3, 4 estimates is the one least inflated by the signal (a 20 Hz sine sampled at 1 kHz
+    // inflates the second differences' estimate, not the fourth's).
+    let diff = |k: usize, quiet: bool| -> Vec<f64> {
+        (k..n)
+            .filter(|&i| !quiet || since[i - k] >= settle)
+            .map(|i| {
+                let mut c = 1.0f64;
+                let mut acc = 0.0;
+                for j in 0..=k {
+                    acc += c * d.y_v[i - j];
+                    c = -c * (k - j) as f64 / (j + 1) as f64;
+                }
+                acc.abs()
+            })
             .collect()
     };
-    let mut v = second(true);
-    if v.len() < 100 {
-        v = second(false);
-    }
-    1.4826 * median(&mut v) / 6f64.sqrt()
+    let quiet = diff(2, true).len() >= 100;
+    [(2usize, 6.0f64), (3, 20.0), (4, 70.0)]
+        .iter()
+        .map(|&(k, var)| 1.4826 * median(&mut diff(k, quiet)) / var.sqrt())
+        .fold(f64::INFINITY, f64::min)
 }
 
 /// Simulate `model` (without sensor noise) on a record.

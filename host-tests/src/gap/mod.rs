@@ -38,8 +38,10 @@
 //! * [`catalogue`]: the effects, how each sits in the model file, its bounds;
 //! * [`fast_fit`] and [`slow_fit`] (with [`nnls`], the sign-constrained solve): the fits of
 //!   step 4;
+//! * [`polish`]: the play radii refined continuously once hysteresis is named;
 //! * [`select`]: the greedy driver: candidates, scores, selection, the final check (steps 4-6);
-//! * [`report`]: the table and the HTML report of a [`Diagnosis`];
+//! * [`report`]: the table and the HTML report of a [`Diagnosis`]; [`unexplained`]: what is
+//!   left above twice the floor and where (never silent);
 //! * [`protocol`]: the recording protocol whose records show every effect; [`demo`]: the
 //!   virtual stage of `piezo demo`.
 
@@ -49,11 +51,13 @@ pub mod data;
 pub mod demo;
 pub mod fast_fit;
 pub mod nnls;
+pub mod polish;
 pub mod protocol;
 pub mod report;
 pub mod select;
 pub mod signatures;
 pub mod slow_fit;
+pub mod unexplained;
 
 pub use constants::*;
 pub use data::{Data, load_data, min_max, mse, noise_floor, sim};

@@ -4,7 +4,9 @@
 //! (plotters) a person would look at:
 //! * measured vs simulated, base and final model, for every record;
 //! * the residual before and after each step, for every record;
-//! * each effect's evidence: residual against input (hysteresis loop), residual during holds
+//! * the unexplained residual, when there is one ([`super::unexplained`]), against the input;
+//! * each effect's evidence: residual against input (hysteresis loop, every record with
+//!   reversals, base and final model), residual during holds
 //!   (drift tails), static residual against input (gain curve), the first step edges of the
 //!   fast record (delay, pole, slew), the residual spectrum (resonance).
 
@@ -67,6 +69,13 @@ impl Diagnosis {
             1e3 * self.final_rms_v,
             self.final_rms_v / self.noise_floor_v.max(1e-12)
         ));
+        if let Some(u) = &self.unexplained {
+            s.push_str(&format!(
+                "unexplained: {:.2} mV above the noise, no catalogued effect is admissible; where: {}\n",
+                1e3 * u.rms_v,
+                u.where_
+            ));
+        }
         s
     }
 }
@@ -276,30 +285,70 @@ pub fn write(dir: &Path, base: &ModelFile, data: &[Data], d: &Diagnosis) -> anyh
             false,
         ));
     }
-    h.push_str("</div><h2>Evidence (base model's residual)</h2><div class=\"row\">");
-    // Residual against input (loop), static curve and tails, on the slow records.
-    for (r, rec) in data.iter().enumerate().filter(|(_, x)| !x.is_fast()) {
+    h.push_str("</div>");
+    if let Some(u) = &d.unexplained {
+        let _ = write!(
+            h,
+            "<h2>Unexplained</h2><p>{:.2} mV RMS above the noise stays after the last step and no \
+             catalogued effect is admissible. Where: {}</p><div class=\"row\">",
+            1e3 * u.rms_v,
+            esc(&u.where_)
+        );
+        for (r, rec) in data.iter().enumerate() {
+            let res: Vec<(f64, f64)> = rec
+                .u_v
+                .iter()
+                .zip(rec.y_v.iter().zip(final_sims[r]))
+                .map(|(u, (y, m))| (*u, 1e3 * (y - m)))
+                .collect();
+            h.push_str(&plot(
+                &format!("{}: final residual against input", rec.name),
+                "u (V)",
+                "residual (mV)",
+                &[("final residual".into(), thin(res, 4000))],
+                true,
+                false,
+            ));
+        }
+        h.push_str("</div>");
+    }
+    h.push_str("<h2>Evidence (base model's residual)</h2><div class=\"row\">");
+    // Residual against input (loop, gain curve) for every record with reversals, before and
+    // after; tails for every record with holds.
+    for (r, rec) in data.iter().enumerate() {
         let res: Vec<f64> = rec
             .y_v
             .iter()
             .zip(&d.base_sims[r])
             .map(|(y, m)| 1e3 * (y - m))
             .collect();
-        let loop_pts = thin(
-            rec.u_v.iter().copied().zip(res.iter().copied()).collect(),
-            4000,
-        );
-        h.push_str(&plot(
-            &format!(
-                "{}: residual against input (hysteresis loop, gain curve)",
-                rec.name
-            ),
-            "u (V)",
-            "residual (mV)",
-            &[("residual".into(), loop_pts)],
-            true,
-            false,
-        ));
+        if rec.reversals() > 0 {
+            let loop_pts = thin(
+                rec.u_v.iter().copied().zip(res.iter().copied()).collect(),
+                4000,
+            );
+            let after: Vec<(f64, f64)> = rec
+                .u_v
+                .iter()
+                .zip(rec.y_v.iter().zip(final_sims[r]))
+                .map(|(u, (y, m))| (*u, 1e3 * (y - m)))
+                .collect();
+            h.push_str(&plot(
+                &format!(
+                    "{}: residual against input ({} reversals; hysteresis loop, gain curve)",
+                    rec.name,
+                    rec.reversals()
+                ),
+                "u (V)",
+                "residual (mV)",
+                &[
+                    ("base model".into(), loop_pts),
+                    ("final model".into(), thin(after, 4000)),
+                ],
+                true,
+                false,
+            ));
+        }
         // Tails: residual during holds, time since the hold began.
         let mut tails: Vec<Series> = Vec::new();
         let n = rec.len();

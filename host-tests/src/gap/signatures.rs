@@ -16,7 +16,9 @@
 //!   falling input at the same input level: hysteresis;
 //! * **static curve** (settled samples): the curvature of the residual against the input:
 //!   non-linear gain;
-//! * **range**: whether the input comes near the amplifier's limits: saturation.
+//! * **range**: whether the input comes near the amplifier's limits: saturation;
+//! * **level and scale** (all samples): the least-squares line of the residual against the
+//!   simulated output: its intercept is an `offset`, its slope a `sensor-gain` error.
 //!
 //! Each is a number with a unit; [`Signatures::supports`] turns them into the gate the
 //! selection uses, [`Signatures::describe`] into words for the table.
@@ -42,6 +44,10 @@ pub struct Signatures {
     pub curve_v: f64,
     /// Input span (min, max), volts.
     pub u_span_v: (f64, f64),
+    /// Intercept of the residual's least-squares line against the simulated output, volts.
+    pub level_v: f64,
+    /// Slope of that line (a scale error of the monitor), fraction.
+    pub scale: f64,
     /// Noise floor, volts.
     pub noise_v: f64,
     /// Residual spectrum of the first fast record: (frequency Hz, magnitude V) for plots.
@@ -65,8 +71,18 @@ pub fn compute(data: &[Data], sims: &[Vec<f64>], noise: &[f64]) -> Signatures {
     };
     let mut edge_p = 0.0;
     let mut all_p = 0.0;
+    // Sums of the residual's line against the simulated output (records weigh equally).
+    let (mut s1, mut sx, mut sxx, mut sr, mut sxr) = (0.0, 0.0, 0.0, 0.0, 0.0);
     for (d, y) in data.iter().zip(sims) {
         let r: Vec<f64> = d.y_v.iter().zip(y).map(|(a, b)| a - b).collect();
+        let w = 1.0 / d.len().max(1) as f64;
+        for (x, e) in y.iter().zip(&r) {
+            s1 += w;
+            sx += w * x;
+            sxx += w * x * x;
+            sr += w * e;
+            sxr += w * x * e;
+        }
         let (lo, hi) = super::min_max(&d.u_v);
         s.u_span_v = (s.u_span_v.0.min(lo), s.u_span_v.1.max(hi));
         let t = d.period_s();
@@ -75,7 +91,7 @@ pub fn compute(data: &[Data], sims: &[Vec<f64>], noise: &[f64]) -> Signatures {
             let win = (3e-3 / t).ceil() as usize;
             let mut since = usize::MAX;
             for i in 0..n {
-                if i > 0 && (d.u_v[i] - d.u_v[i - 1]).abs() > 0.02 {
+                if d.is_jump(i) {
                     since = 0;
                 } else {
                     since = since.saturating_add(1);
@@ -117,7 +133,7 @@ pub fn compute(data: &[Data], sims: &[Vec<f64>], noise: &[f64]) -> Signatures {
         let mut xs = Vec::new();
         for i in 1..n {
             let du = d.u_v[i] - d.u_v[i - 1];
-            if du.abs() > 0.02 || du == 0.0 {
+            if d.is_jump(i) || du == 0.0 {
                 continue;
             }
             let b = (((d.u_v[i] - lo) / span * bins as f64) as usize).min(bins - 1);
@@ -137,6 +153,11 @@ pub fn compute(data: &[Data], sims: &[Vec<f64>], noise: &[f64]) -> Signatures {
         }
     }
     s.edge_share = if all_p > 0.0 { edge_p / all_p } else { 0.0 };
+    let det = s1 * sxx - sx * sx;
+    if det.abs() > 1e-12 * (s1 * sxx).max(1e-300) {
+        s.scale = (s1 * sxr - sx * sr) / det;
+        s.level_v = (sr - s.scale * sx) / s1;
+    }
     s
 }
 
@@ -299,6 +320,14 @@ impl Signatures {
             "saturation" => format!(
                 "input spans {:.2}..{:.2} V, near the amplifier's limits",
                 self.u_span_v.0, self.u_span_v.1
+            ),
+            "offset" => format!(
+                "the residual's line against the simulated output sits {} off zero",
+                mv(self.level_v)
+            ),
+            "sensor-gain" => format!(
+                "the residual grows with the simulated output, {:+.2} % of it",
+                100.0 * self.scale
             ),
             _ => String::new(),
         }

@@ -10,7 +10,9 @@
 //! Records weigh equally (each record's normal equations are divided by its settled samples).
 
 use super::catalogue::{self, SlowParams};
-use super::constants::{DRIFT_REFINE_PASSES, DRIFT_REFINE_TOL_V2, SETTLE_S, STRUCTURE_ROUNDS};
+use super::constants::{
+    DRIFT_REFINE_PASSES, DRIFT_REFINE_TOL_V2, DRIFT_TAU_MAX_RECORDS, SETTLE_S, STRUCTURE_ROUNDS,
+};
 use super::data::Data;
 use super::nnls::{nnls_normal, ridge};
 use crate::util::golden_n;
@@ -55,10 +57,46 @@ impl Shape {
 }
 
 const N_TAU: usize = catalogue::DRIFT_TAU_GRID_S.len();
-const N_PLAY: usize = params::PLAY_OPERATORS;
+const N_PLAY: usize = catalogue::PLAY_GRID_V.len();
 const COL_PLAY: usize = N_TAU;
 const COL_GAIN: usize = N_TAU + N_PLAY;
-const N_COLS: usize = N_TAU + N_PLAY + 2;
+/// Columns that depend on the input alone (kept in [`SlowRegressors`]).
+const N_INPUT_COLS: usize = N_TAU + N_PLAY + 2;
+/// The offset's column: a constant 1.
+const COL_OFFSET: usize = N_INPUT_COLS;
+/// The sensor gain's column: the simulated output without slow effects (`y0`): a scale error
+/// of the monitor scales the whole output.
+const COL_SGAIN: usize = N_INPUT_COLS + 1;
+const N_COLS: usize = N_INPUT_COLS + 2;
+
+/// Value of regressor column `c` of record `r` at sample `i` (`y0`: the simulated output
+/// without slow effects, the sensor gain's column).
+#[inline]
+fn col(x: &SlowRegressors, y0: &[Vec<f64>], r: usize, c: usize, i: usize) -> f64 {
+    match c {
+        COL_OFFSET => 1.0,
+        COL_SGAIN => y0[r][i],
+        _ => x.cols[r][c][i],
+    }
+}
+
+/// The columns of the slow effects in `set` other than the drift's lags.
+fn fixed_cols(set: &[&str]) -> Vec<usize> {
+    let mut fixed: Vec<usize> = Vec::new();
+    if set.contains(&"hysteresis") {
+        fixed.extend(COL_PLAY..COL_PLAY + N_PLAY);
+    }
+    if set.contains(&"nonlinear-gain") {
+        fixed.extend([COL_GAIN, COL_GAIN + 1]);
+    }
+    if set.contains(&"offset") {
+        fixed.push(COL_OFFSET);
+    }
+    if set.contains(&"sensor-gain") {
+        fixed.push(COL_SGAIN);
+    }
+    fixed
+}
 
 pub(super) fn slow_regressors(data: &[Data]) -> SlowRegressors {
     slow_regressors_shaped(data, &Shape::default())
@@ -85,7 +123,7 @@ fn slow_regressors_shaped(data: &[Data], shape: &Shape) -> SlowRegressors {
             }
             c.push(v);
         }
-        for r in params::PLAY_RADII_V {
+        for r in catalogue::PLAY_GRID_V {
             let mut z = d.u_v[0];
             c.push(
                 d.u_v
@@ -109,7 +147,7 @@ fn slow_regressors_shaped(data: &[Data], shape: &Shape) -> SlowRegressors {
         let mut m = vec![true; n];
         let mut last_jump: Option<usize> = None;
         for i in 0..n {
-            if i > 0 && (d.u_v[i] - d.u_v[i - 1]).abs() > 0.02 {
+            if d.is_jump(i) {
                 last_jump = Some(i);
             }
             if let Some(j) = last_jump
@@ -203,6 +241,12 @@ fn fit_drift_poly(
     if p.gain.is_some() {
         fixed.extend([COL_GAIN, COL_GAIN + 1]);
     }
+    if p.offset_v.is_some() {
+        fixed.push(COL_OFFSET);
+    }
+    if p.sensor_gain.is_some() {
+        fixed.push(COL_SGAIN);
+    }
     let nf = fixed.len();
     let np = 6 + nf;
     let mut g = DMatrix::<f64>::zeros(np, np);
@@ -227,7 +271,7 @@ fn fit_drift_poly(
                     row[3 + j] = (0..3).map(|k| gains[k] * lp[j][k]).sum();
                 }
                 for (c, &col) in fixed.iter().enumerate() {
-                    row[6 + c] = xs.cols[r][col][i];
+                    row[6 + c] = self::col(&xs, y0, r, col, i);
                 }
                 let e = d.y_v[i] - y0[r][i];
                 for k in 0..np {
@@ -295,6 +339,8 @@ fn fit_slow_linear(
             for (k, c) in cols.iter().enumerate() {
                 row[k] = c[i];
             }
+            row[COL_OFFSET] = 1.0;
+            row[COL_SGAIN] = y0[r][i];
             for k in 0..N_COLS {
                 bl[k] += row[k] * e;
                 for l in 0..=k {
@@ -331,13 +377,7 @@ fn fit_slow_linear(
             .all(|x| x.is_finite())
             .then(|| (beta.iter().copied().collect(), red))
     };
-    let mut fixed: Vec<usize> = Vec::new();
-    if set.contains(&"hysteresis") {
-        fixed.extend(COL_PLAY..COL_PLAY + N_PLAY);
-    }
-    if set.contains(&"nonlinear-gain") {
-        fixed.extend([COL_GAIN, COL_GAIN + 1]);
-    }
+    let fixed = fixed_cols(set);
     let unpack = |idx: &[usize], beta: &[f64], taus: Option<[usize; 3]>| -> SlowParams {
         let get = |k: usize| {
             idx.iter()
@@ -357,23 +397,35 @@ fn fit_slow_linear(
                 )
             }),
             hysteresis: set.contains(&"hysteresis").then(|| {
-                let mut w = [0.0; N_PLAY];
-                for (i, wi) in w.iter_mut().enumerate() {
-                    *wi = get(COL_PLAY + i);
-                }
-                w
+                let w: Vec<f64> = (0..N_PLAY).map(|i| get(COL_PLAY + i)).collect();
+                catalogue::reduce_play(&w)
             }),
             gain: set
                 .contains(&"nonlinear-gain")
                 .then(|| (get(COL_GAIN), get(COL_GAIN + 1))),
             drift_poly: None,
+            sensor_gain: set.contains(&"sensor-gain").then(|| 1.0 + get(COL_SGAIN)),
+            offset_v: set.contains(&"offset").then(|| get(COL_OFFSET)),
         }
     };
     if set.contains(&"drift") {
+        // Time constants beyond DRIFT_TAU_MAX_RECORDS record lengths are not drift the records
+        // can show: such a lag barely moves within them and acts as a constant (an offset) or
+        // a ramp.
+        let longest_s = data
+            .iter()
+            .map(|d| d.t_s[d.len() - 1] - d.t_s[0])
+            .fold(0.0f64, f64::max);
+        let tau_max = DRIFT_TAU_MAX_RECORDS * longest_s;
+        let n_tau = catalogue::DRIFT_TAU_GRID_S
+            .iter()
+            .filter(|t| **t <= tau_max)
+            .count()
+            .max(3);
         let mut best: Option<(f64, [usize; 3])> = None;
-        for i in 0..N_TAU {
-            for j in i + 1..N_TAU {
-                for k in j + 1..N_TAU {
+        for i in 0..n_tau {
+            for j in i + 1..n_tau {
+                for k in j + 1..n_tau {
                     let mut idx = vec![i, j, k];
                     idx.extend(&fixed);
                     if let Some((beta, red)) = solve(&idx) {
@@ -428,7 +480,7 @@ fn fit_slow_linear(
                 let hi = if m < 2 {
                     taus[m + 1] / 1.05
                 } else {
-                    grid[N_TAU - 1] * 2.0
+                    (grid[N_TAU - 1] * 2.0).min(tau_max.max(grid[n_tau - 1]))
                 };
                 // Also skips NaN bounds.
                 if lo.partial_cmp(&hi) != Some(std::cmp::Ordering::Less) {
@@ -462,14 +514,38 @@ fn fit_slow_linear(
         }
         let mut p = unpack(&fixed, &beta[3..], None);
         p.drift = Some(([beta[0], beta[1], beta[2]], taus));
-        Some(p)
+        Some(descale(p))
     } else {
         if fixed.is_empty() {
             return None;
         }
         let (beta, _) = solve(&fixed)?;
-        Some(unpack(&fixed, &beta, None))
+        Some(descale(unpack(&fixed, &beta, None)))
     }
+}
+
+/// The slow effects' weights as the stage has them: the monitor's scale error `g` multiplies
+/// everything before the sensor, so the solve's coefficients of the drift, play and gain
+/// columns are `g` times the stage's parameters.
+fn descale(mut p: SlowParams) -> SlowParams {
+    let Some(g) = p.sensor_gain.filter(|g| *g > 0.1) else {
+        return p;
+    };
+    if let Some((gains, _)) = p.drift.as_mut() {
+        for v in gains.iter_mut() {
+            *v /= g;
+        }
+    }
+    if let Some((_, w)) = p.hysteresis.as_mut() {
+        for v in w.iter_mut() {
+            *v /= g;
+        }
+    }
+    if let Some((c1, c2)) = p.gain.as_mut() {
+        *c1 /= g;
+        *c2 /= g;
+    }
+    p
 }
 
 /// Is regressor column `k` one whose coefficient is kept >= 0: a drift lag's or a play
@@ -524,7 +600,7 @@ impl<'a> DriftProblem<'a> {
                 let e = idx.iter().map(|&i| d.y_v[i] - y0[r][i]).collect();
                 let mut f = Vec::with_capacity(idx.len() * nf);
                 for &i in &idx {
-                    f.extend(fixed.iter().map(|&c| x.cols[r][c][i]));
+                    f.extend(fixed.iter().map(|&c| col(x, y0, r, c, i)));
                 }
                 (w, idx, e, f)
             })

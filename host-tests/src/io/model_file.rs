@@ -49,6 +49,12 @@
 //! [slew-rate-limit]               # effect `slew-rate-limit`, at the amplifier output
 //! output_v_per_s = 1.5e6
 //!
+//! [sensor-gain]                   # effect `sensor-gain`: the monitor's scale error,
+//! gain = 1.02                     # multiplies [converters] sensor_gain
+//!
+//! [offset]                        # effect `offset`: the monitor's / ADC's zero error
+//! offset_v = 0.012                # added to every reading
+//!
 //! [saturation]                    # effect `saturation`: amplifier ranges
 //! input_range_v = [-2.0, 12.0]
 //! output_range_v = [-20.0, 120.0]
@@ -265,6 +271,22 @@ pub struct PlaySection {
     pub weights: [f64; model_core::params::PLAY_OPERATORS],
 }
 
+/// `[sensor-gain]`: the monitor's static scale error.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SensorGainSection {
+    /// Factor on `[converters] sensor_gain` (the nominal calibration).
+    pub gain: f64,
+}
+
+/// `[offset]`: the monitor's (or the ADC's) zero error.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct OffsetSection {
+    /// Added to every monitor reading, volts.
+    pub offset_v: f64,
+}
+
 /// `[saturation]`.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -329,6 +351,16 @@ pub struct ModelFile {
     /// `saturation`.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub saturation: Option<SaturationSection>,
+    /// `sensor-gain`.
+    #[serde(
+        rename = "sensor-gain",
+        default,
+        skip_serializing_if = "Option::is_none"
+    )]
+    pub sensor_gain: Option<SensorGainSection>,
+    /// `offset`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub offset: Option<OffsetSection>,
     /// `hysteresis` in the fitted play form.
     #[serde(
         rename = "hysteresis-play",
@@ -441,6 +473,10 @@ impl ModelFile {
                 input_range_v: pair(c.amplifier.input_range_v),
                 output_range_v: pair(c.amplifier.output_range_v),
             }),
+            sensor_gain: None,
+            offset: (c.sensor.offset_v != 0.0).then_some(OffsetSection {
+                offset_v: c.sensor.offset_v,
+            }),
             hysteresis: c.hysteresis.as_ref().map(HysteresisSection::from_table),
             hysteresis_play: c.play.map(|p| PlaySection {
                 radii_v: p.radii_v,
@@ -505,7 +541,12 @@ impl ModelFile {
             }),
             delay_s: self.time_delay.as_ref().map_or(0.0, |d| d.delay_s),
             sensor: SensorConfig {
-                gain: self.converters.sensor_gain,
+                gain: self.converters.sensor_gain
+                    * self.sensor_gain.as_ref().map_or(1.0, |g| g.gain),
+                offset_v: self
+                    .offset
+                    .as_ref()
+                    .map_or(params::SENSOR_OFFSET_V, |o| o.offset_v),
                 noise_v: self.converters.noise_v,
                 adc: self.converters.adc,
                 seed: self.converters.seed,
@@ -571,7 +612,7 @@ impl ModelFile {
             .validate()
             .map_err(|e| anyhow::anyhow!("[amplifier] / [slew-rate-limit] / [saturation]: {e}"))?;
         model_core::sensor::Sensor::new(&c.sensor)
-            .map_err(|e| anyhow::anyhow!("[converters]: {e}"))?;
+            .map_err(|e| anyhow::anyhow!("[converters] / [sensor-gain] / [offset]: {e}"))?;
         Ok(())
     }
 
