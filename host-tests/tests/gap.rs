@@ -577,7 +577,45 @@ fn clean_record_gets_no_name_and_table_has_contract_keys() {
     println!("noise floor {:.3} mV (truth 1 mV)", 1e3 * d.noise_floor_v);
     assert!((d.noise_floor_v - 1e-3).abs() < 0.1e-3);
     assert!(d.named.is_empty());
+    // Never silent, and never crying wolf: a clean record leaves nothing unexplained.
+    assert!(j["unexplained"].is_null(), "{}", j["unexplained"]);
     let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// Never silent (issue #12, item 5): a 50 Hz hum of 20 mV on the monitor, which no effect of
+/// the catalogue can make from the input, stays in the residual; the JSON says so, with its
+/// size (the hum's RMS, 14.1 mV, within 20 %) and where it is (the hum's frequency).
+#[test]
+fn a_residual_no_effect_explains_is_reported_as_unexplained() {
+    let mut truth = ModelFile::built_in("thesis-linear").unwrap();
+    truth.converters.noise_v = 1e-3;
+    truth.converters.seed = 91;
+    let stage = truth.build_stage().unwrap();
+    let (t, u) = protocol::slow_input(1_000.0, 20.0);
+    let y: Vec<f64> = simulate(&stage, truth.period_s, &t, &u)
+        .iter()
+        .zip(&t)
+        .map(|(y, t)| y + 0.02 * (2.0 * std::f64::consts::PI * 50.0 * t).sin())
+        .collect();
+    let data =
+        vec![Data::from_record("hum.csv", Record::new(t, u, Some(y), None).unwrap()).unwrap()];
+    let base = ModelFile::built_in("thesis-linear").unwrap();
+    let d = diagnose(&base, &data, &Options::default()).unwrap();
+    println!("{}", d.table());
+    let j = d.to_json();
+    println!("unexplained: {}", j["unexplained"]);
+    let un = d
+        .unexplained
+        .as_ref()
+        .expect("the hum must be reported as unexplained");
+    let hum_rms_v = 0.02 / std::f64::consts::SQRT_2;
+    assert!(
+        (un.rms_v - hum_rms_v).abs() < 0.2 * hum_rms_v,
+        "unexplained {} V against the hum's {hum_rms_v} V",
+        un.rms_v
+    );
+    assert!(un.where_.contains("50.0"), "{}", un.where_);
+    assert!(j["unexplained"]["rms_v"].is_number() && j["unexplained"]["where"].is_string());
 }
 
 /// The full thesis stage (`thesis-full`: Everett hysteresis, drift with its K(u), K'(u), slew
