@@ -132,7 +132,7 @@ async fn main(spawner: Spawner) {
         Err(_) => defmt::panic!("USART3 configuration"),
     };
 
-    Timer::after_millis(10).await;
+    Timer::after_micros((design_parameters::BOOT_LOOP_TO_TASKS_S * 1e6) as u64).await;
     output_enable.set_high();
     core::mem::forget(output_enable); // stays high; the reset state (input, pulled down) opens it
 

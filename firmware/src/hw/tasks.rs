@@ -7,7 +7,7 @@ use core::sync::atomic::Ordering;
 use embassy_stm32::gpio::Output;
 use embassy_stm32::usart::BufferedUart;
 use embassy_stm32::wdg::IndependentWatchdog;
-use embassy_time::{Duration, Ticker, Timer, with_timeout};
+use embassy_time::{Duration, Ticker, with_timeout};
 use embedded_io_async::{Read, Write};
 use firmware::capture::CaptureState;
 use firmware::command::{self, CaptureRequest, Command, ModeRequest};
@@ -16,7 +16,7 @@ use firmware::liveness::{TASK_COMMAND, TASK_HEARTBEAT, Verdict};
 use firmware::scaling::{self, TimerSetting};
 use heapless::String;
 use model_core::frame::{self, FrameRef, Record};
-use model_core::{AdcCode, DacCode, params};
+use model_core::{AdcCode, DacCode};
 
 use super::board::{CPU_HZ, TIMER_CLOCK_HZ};
 use super::shared::*;
@@ -46,7 +46,7 @@ pub fn apply_rate_limits(rate_hz: f64) {
         Ordering::Relaxed,
     );
     STALL_SAMPLES.store(
-        (design_parameters::TASK_STALL_S * rate_hz) as u32,
+        firmware::liveness::stall_samples(rate_hz),
         Ordering::Relaxed,
     );
 }
@@ -348,7 +348,8 @@ pub async fn command_task(
         .await;
     loop {
         LIVENESS.check_in(TASK_COMMAND);
-        let n = match with_timeout(Duration::from_millis(10), uart.read(&mut byte)).await {
+        let check_in = Duration::from_micros((design_parameters::TASK_CHECK_IN_S * 1e6) as u64);
+        let n = match with_timeout(check_in, uart.read(&mut byte)).await {
             Ok(Ok(n)) => n,
             Ok(Err(_)) => continue, // framing/noise error: drop the byte
             Err(_) => continue,     // timeout: just check in again
@@ -393,23 +394,31 @@ pub async fn command_task(
     }
 }
 
-/// Blinks the green LED; lights the red one while a fault is latched.
+/// Checks in every `TASK_CHECK_IN_S`; blinks the green LED every `HEARTBEAT_HALF_PERIOD_S`;
+/// lights the red one while a fault is latched. (Checking in only at each LED toggle, every
+/// 250 ms, was the watchdog reset loop of issue 13 item 1.)
 #[embassy_executor::task]
 pub async fn heartbeat_task(mut led: Output<'static>, mut fault_led: Output<'static>) {
-    let half = Duration::from_micros((design_parameters::HEARTBEAT_HALF_PERIOD_S * 1e6) as u64);
+    let tick = Duration::from_micros((design_parameters::TASK_CHECK_IN_S * 1e6) as u64);
+    let mut ticker = Ticker::every(tick);
+    let mut ticks = 0u32;
     loop {
-        led.toggle();
+        if ticks == 0 {
+            led.toggle();
+        }
+        ticks = (ticks + 1) % design_parameters::HEARTBEAT_TICKS_PER_TOGGLE;
         if STATUS.faults.load(Ordering::Relaxed) != 0 {
             fault_led.set_high();
         } else {
             fault_led.set_low();
         }
         LIVENESS.check_in(TASK_HEARTBEAT);
-        Timer::after(half).await;
+        ticker.next().await;
     }
 }
 
-/// Feeds the IWDG while the interrupt and the tasks are alive (`firmware::liveness`).
+/// Feeds the IWDG while the interrupt and the tasks are alive (`firmware::liveness`). Logs a
+/// verdict only when it changes, so a stall does not log every period.
 #[embassy_executor::task]
 pub async fn supervisor_task(
     mut iwdg: IndependentWatchdog<'static, embassy_stm32::peripherals::IWDG1>,
@@ -417,22 +426,27 @@ pub async fn supervisor_task(
     let period = Duration::from_micros((design_parameters::SUPERVISOR_PERIOD_S * 1e6) as u64);
     let mut ticker = Ticker::every(period);
     let mut last = 0u32;
+    let mut previous = Verdict::Feed;
     iwdg.unleash();
     loop {
-        // The rate may change at run time: the stall limit is the published one; the least
-        // advance is half a period's worth at the slowest allowed rate.
+        // The rate may change at run time: the stall limit is the published one.
         let stall = STALL_SAMPLES.load(Ordering::Relaxed);
-        let min_advance =
-            (design_parameters::SUPERVISOR_PERIOD_S * params::MIN_SAMPLE_RATE_HZ / 2.0) as u32;
-        match LIVENESS.supervise(&mut last, min_advance, stall) {
-            Verdict::Feed => iwdg.pet(),
-            Verdict::IsrStalled { advanced } => {
-                defmt::warn!("control interrupt stalled ({} samples)", advanced)
-            }
-            Verdict::TasksStalled { missing } => {
-                defmt::warn!("tasks stalled (missing {:x})", missing)
+        let verdict = LIVENESS.supervise(&mut last, firmware::liveness::min_advance(), stall);
+        if verdict == Verdict::Feed {
+            iwdg.pet();
+        }
+        if core::mem::discriminant(&verdict) != core::mem::discriminant(&previous) {
+            match verdict {
+                Verdict::Feed => defmt::info!("liveness restored"),
+                Verdict::IsrStalled { advanced } => {
+                    defmt::warn!("control interrupt stalled ({} samples)", advanced)
+                }
+                Verdict::TasksStalled { missing } => {
+                    defmt::warn!("tasks stalled (missing {:x})", missing)
+                }
             }
         }
+        previous = verdict;
         ticker.next().await;
     }
 }
