@@ -92,7 +92,7 @@ pub const FAULT_AT_S: f64 = 0.2;
 pub const MOVE_AT_S: f64 = 0.25;
 /// Where the reference moves in the stuck-sensor scenario, sensor volts.
 pub const MOVE_TO_V: f64 = 7.0;
-/// The absurd gain offered in the absurd-gain scenario (a thousand times [`LAG_KC_MAX`]).
+/// The absurd gain offered in the absurd-gain scenario (a thousand times [`params::LAG_KC_MAX`]).
 pub const ABSURD_KC: f64 = 1.0e9;
 /// Seed of the scenarios' sensor noise generator.
 pub const NOISE_SEED: u32 = 0x2545_f491;
@@ -412,9 +412,10 @@ impl Figures {
                 {
                     return Err("the fault latched too early or too late");
                 }
-                // From at most the top of the window, the ramp takes window / slew samples.
+                // From at most the top of the window, the ramp takes window / safe-ramp step
+                // samples (1 V/ms by default: 500 samples for 10 V at 50 kHz).
                 let l = controller.lag.limits;
-                let ramp = ((l.max_v - l.min_v) / l.slew_v_per_step) as u32 + 2;
+                let ramp = ((l.max_v - l.min_v) / controller.safe_ramp_v_per_step()) as u32 + 2;
                 if self.safe_reached_at == NEVER
                     || self.safe_reached_at > self.fault_latched_at.saturating_add(ramp)
                 {

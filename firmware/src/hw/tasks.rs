@@ -26,12 +26,13 @@ use firmware::settings::Settings;
 use model_core::controller::{Faults, Mode};
 
 /// Fault bits and their names, for `faults` and `status`.
-const FAULT_NAMES: [(Faults, &str); 5] = [
+const FAULT_NAMES: [(Faults, &str); 6] = [
     (Faults::SENSOR_RANGE, "sensor_range"),
     (Faults::SENSOR_STUCK, "sensor_stuck"),
     (Faults::NONFINITE, "nonfinite"),
     (Faults::OVERRUN, "overrun"),
     (Faults::WATCHDOG, "watchdog"),
+    (Faults::SATURATED, "saturated"),
 ];
 
 type Reply = String<512>;
