@@ -86,6 +86,16 @@ pub const ADC_R_REF_OHM: f64 = 32.4e3;
 pub const ADC_R_GND_OHM: f64 = 48.7e3;
 /// VREF+ of the NUCLEO-H743ZI2 (tied to VDDA, 3.3 V; UM2407).
 pub const ADC_VREF_V: f64 = 3.3;
+/// ADC front end: pull resistor from the input node (the BNC side of R1) to
+/// [`ADC_PULL_RAIL_V`], ohms (issue 13 item 2; our design). With the sensor unplugged the
+/// node would sit at 1.98 V through the network (a plausible reading); with this pull it
+/// reads -2.5 V, below the controller's `SENSOR_VALID_MIN_V` (-0.5 V) by 2 V, and the pin
+/// stays inside 0..VREF+. With the E-509 connected (a low-impedance op-amp output) it only
+/// draws 30..76 uA from the monitor and does not change the scaling.
+pub const ADC_R_PULL_OHM: f64 = 330.0e3;
+/// ADC front end: the rail the pull resistor goes to, volts (the -15 V of the output stage's
+/// supply; our design).
+pub const ADC_PULL_RAIL_V: f64 = -15.0;
 
 // ----- Calibration a `cal` command may set. -----
 /// Largest gain correction a `cal` command may set (our assumption: +-10 %).
