@@ -137,7 +137,8 @@ pub fn front_end_pin_v(input_v: Option<f64>) -> f64 {
 /// The right-aligned 16-bit result the ADC gives for `pin_v` (clamped to the rails).
 pub fn adc_raw_of_pin(pin_v: f64) -> u32 {
     let vref = design_parameters::ADC_VREF_V;
-    (pin_v / vref * 65536.0).floor().clamp(0.0, 65535.0) as u32
+    // `as` truncates: the floor, for the non-negative values left after the clamp.
+    (pin_v / vref * 65536.0).clamp(0.0, 65535.0) as u32
 }
 
 /// The 12-bit value for the internal DAC: the 14-bit offset-binary code without its two

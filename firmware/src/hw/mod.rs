@@ -7,13 +7,14 @@
 //! 4. ADC armed on the TIM2 trigger, interrupt priorities set (control highest), TIM2 started;
 //! 5. output-enable switch closed once the loop runs; tasks spawned; IWDG started.
 //!
-//! If the IWDG reset the chip, the WATCHDOG fault is raised at boot: the controller stays in
-//! safe until `clear`.
+//! If the IWDG, a panic or a HardFault reset the chip (`safe_state`), the WATCHDOG fault is
+//! raised at boot: the controller stays in safe until `clear`; `status` names the reason.
 
 mod adc;
 mod board;
 mod control;
 mod dac;
+mod safe_state;
 mod shared;
 mod tasks;
 mod timer;
@@ -34,7 +35,6 @@ use firmware::sample::LoopCore;
 use firmware::scaling::TimerSetting;
 use firmware::stats::CycleStats;
 use model_core::DacCode;
-use panic_probe as _;
 use static_cell::StaticCell;
 
 use firmware::settings::Settings;
@@ -53,6 +53,11 @@ async fn main(spawner: Spawner) {
     // Was the last reset the watchdog's? (RCC_RSR, cleared by RMVF.)
     let iwdg_reset = pac::RCC.rsr().read().iwdg1rstf();
     pac::RCC.rsr().modify(|w| w.set_rmvf(true));
+    // A panic or HardFault left its reason in reset-surviving RAM (`safe_state`).
+    let (last_reset, detail) = safe_state::take_last_reset(iwdg_reset);
+    if last_reset != firmware::reset_reason::ResetReason::PowerOn {
+        defmt::warn!("last reset: {} (detail {:x})", last_reset.name(), detail);
+    }
 
     let mut cp = cortex_m::Peripherals::take().expect("core peripherals are taken once, here");
     cp.SCB.enable_icache();
@@ -85,7 +90,8 @@ async fn main(spawner: Spawner) {
 
     // 3. The interrupt's context.
     let mut state = ControllerState::new(&config.controller);
-    if iwdg_reset {
+    if last_reset != firmware::reset_reason::ResetReason::PowerOn {
+        // Watchdog, panic or HardFault: stay safe until `clear`.
         state.raise(Faults::WATCHDOG);
     }
     let Some(producer) = shared::CAPTURE.producer() else {

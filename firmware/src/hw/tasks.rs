@@ -94,6 +94,15 @@ fn status(out: &mut Reply, settings: &Settings) {
         st.samples,
     );
     write_faults(out, STATUS.faults.load(Ordering::Relaxed));
+    let reason = firmware::reset_reason::ResetReason::from_code(
+        super::safe_state::LAST_RESET_REASON.load(Ordering::Relaxed),
+    )
+    .map_or("?", |r| r.name());
+    let _ = write!(
+        out,
+        " last_reset={reason} detail=0x{:x}",
+        super::safe_state::LAST_RESET_DETAIL.load(Ordering::Relaxed)
+    );
 }
 
 /// Builds, checks and posts a controller for `candidate`; on success it becomes the settings.
