@@ -6,6 +6,7 @@
 #![cfg_attr(not(test), no_std)]
 #![warn(missing_docs)]
 
+pub mod app;
 pub mod capture;
 pub mod command;
 pub mod design_parameters;

@@ -100,7 +100,7 @@ async fn main(spawner: Spawner) {
     let Some(consumer) = shared::CAPTURE.consumer() else {
         defmt::panic!("the capture consumer is taken once")
     };
-    tasks::apply_rate_limits(setting.rate_hz);
+    firmware::app::apply_rate_limits(&shared::LINKS, setting.rate_hz, board::CPU_HZ);
     control::install(control::LoopContext {
         core: LoopCore {
             config,
@@ -146,7 +146,8 @@ async fn main(spawner: Spawner) {
     let led = Output::new(p.PB0, Level::Low, Speed::Low);
     let fault_led = Output::new(p.PB14, Level::Low, Speed::Low);
     defmt::info!("loop running at {} Hz", setting.rate_hz);
-    spawner.spawn(tasks::command_task(uart, settings, consumer).expect("spawn command task"));
+    let app = firmware::app::App::new(shared::LINKS, &shared::CAPTURE, consumer, settings);
+    spawner.spawn(tasks::command_task(uart, app).expect("spawn command task"));
     spawner.spawn(tasks::heartbeat_task(led, fault_led).expect("spawn heartbeat task"));
     spawner.spawn(tasks::supervisor_task(iwdg).expect("spawn supervisor task"));
 }

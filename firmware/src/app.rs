@@ -1,0 +1,535 @@
+//! The command task's logic without the UART or the timer (issue 13, virtual board): line
+//! assembly, the command handler, the `status` text and the capture upload as a frame
+//! generator. `src/hw/tasks.rs` runs it on the board with embassy's UART; the virtual board
+//! (`tests/virtual_board.rs`) runs the same code on the host under simulated time.
+//!
+//! The upload is a generator ([`App::next_upload_frame`]) rather than a loop, so the task
+//! reads the link between frames: a `mode safe` sent during an upload is applied after at
+//! most one frame (issue 13 item 8; before, the whole upload, 4.6 s at 921 600 baud, ran
+//! inline and the line was read only after it).
+
+use core::fmt::Write;
+use core::sync::atomic::Ordering;
+
+use model_core::controller::{Faults, Mode};
+use model_core::frame::{self, FrameRef, Record};
+use model_core::{AdcCode, DacCode};
+
+use crate::capture::{CaptureBuffer, CaptureState, Consumer};
+use crate::command::{self, CaptureRequest, Command, ModeRequest};
+use crate::design_parameters;
+use crate::liveness;
+use crate::mailbox::Mailbox;
+use crate::reset_reason::ResetReason;
+use crate::sample::{Links, Status};
+use crate::scaling::{self, TimerSetting};
+use crate::settings::{LoopConfig, Settings};
+
+/// What the command handler needs from the board.
+pub trait Board {
+    /// CPU clock, Hz (the cycle counter's rate).
+    fn cpu_hz(&self) -> u32;
+    /// Clock of the control timer, Hz.
+    fn timer_clock_hz(&self) -> u32;
+    /// Loads a new sampling period into the control timer.
+    fn set_rate(&mut self, t: &TimerSetting);
+    /// The last reset's reason and detail word.
+    fn last_reset(&self) -> (ResetReason, u32);
+}
+
+/// Fault bits and their names, for `faults` and `status`.
+pub const FAULT_NAMES: [(Faults, &str); 6] = [
+    (Faults::SENSOR_RANGE, "sensor_range"),
+    (Faults::SENSOR_STUCK, "sensor_stuck"),
+    (Faults::NONFINITE, "nonfinite"),
+    (Faults::OVERRUN, "overrun"),
+    (Faults::WATCHDOG, "watchdog"),
+    (Faults::SATURATED, "saturated"),
+];
+
+/// Longest reply line, bytes.
+pub const MAX_REPLY: usize = 512;
+
+/// One reply line (without its line ending): a fixed buffer, no allocation; text beyond
+/// [`MAX_REPLY`] is cut.
+#[derive(Clone)]
+pub struct Reply {
+    buf: [u8; MAX_REPLY],
+    len: usize,
+}
+
+impl Default for Reply {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl Reply {
+    /// Empty.
+    pub const fn new() -> Self {
+        Self {
+            buf: [0; MAX_REPLY],
+            len: 0,
+        }
+    }
+    /// The bytes written.
+    pub fn as_bytes(&self) -> &[u8] {
+        self.buf.get(..self.len).unwrap_or(&[])
+    }
+    /// The text written.
+    pub fn as_str(&self) -> &str {
+        core::str::from_utf8(self.as_bytes()).unwrap_or("")
+    }
+}
+
+impl Write for Reply {
+    fn write_str(&mut self, s: &str) -> core::fmt::Result {
+        let room = MAX_REPLY - self.len;
+        let n = s.len().min(room);
+        if let (Some(dst), Some(src)) = (
+            self.buf.get_mut(self.len..self.len + n),
+            s.as_bytes().get(..n),
+        ) {
+            dst.copy_from_slice(src);
+            self.len += n;
+        }
+        if n < s.len() {
+            Err(core::fmt::Error)
+        } else {
+            Ok(())
+        }
+    }
+}
+
+/// Budget and stall limits that follow the loop rate, published for the interrupt.
+pub fn apply_rate_limits(links: &Links<'_>, rate_hz: f64, cpu_hz: u32) {
+    let period_cycles = (f64::from(cpu_hz) / rate_hz) as u32;
+    // Leave the conversion time (at most about 2 us) out of the budget.
+    let conversion_cycles = cpu_hz / 500_000;
+    links.budget_cycles.store(
+        period_cycles.saturating_sub(conversion_cycles),
+        Ordering::Relaxed,
+    );
+    links
+        .stall_samples
+        .store(liveness::stall_samples(rate_hz), Ordering::Relaxed);
+}
+
+fn mode_name(m: Option<Mode>) -> &'static str {
+    match m {
+        Some(Mode::Safe) => "safe",
+        Some(Mode::OpenLoop) => "open",
+        Some(Mode::ClosedLoop) => "closed",
+        Some(Mode::Hold) => "hold",
+        None => "?",
+    }
+}
+
+fn write_faults(out: &mut Reply, bits: u8) {
+    let _ = write!(out, "faults=0x{bits:02x}");
+    for (f, name) in FAULT_NAMES {
+        if bits & f.0 != 0 {
+            let _ = write!(out, " {name}");
+        }
+    }
+}
+
+fn status(out: &mut Reply, settings: &Settings, links: &Links<'_>, board: &impl Board) {
+    let st = links.stats.snapshot();
+    let status = links.status;
+    let mode = status.mode();
+    let y = AdcCode(Status::load_i16(&status.y)).volts();
+    let r = AdcCode(Status::load_i16(&status.r)).volts();
+    let u = DacCode::new(Status::load_i16(&status.u)).volts();
+    let cpu_hz = board.cpu_hz();
+    let _ = write!(
+        out,
+        "ok mode={} y_v={y:.4} r_v={r:.4} u_v={u:.4} rate_hz={:.0} kc={} tau_s={:e} ff={} cal_gain={} cal_offset_v={} isr_max_us={:.2} isr_mean_us={:.2} overruns={} dac_late={} samples={} ",
+        mode_name(mode),
+        settings.rate_hz,
+        settings.kc,
+        settings.tau_s,
+        if settings.feedforward { "on" } else { "off" },
+        settings.adc_cal.gain,
+        settings.adc_cal.offset_v,
+        scaling::cycles_to_us(st.max_cycles, cpu_hz),
+        scaling::cycles_to_us(st.mean_cycles, cpu_hz),
+        st.overruns,
+        status.dac_late.load(Ordering::Relaxed),
+        st.samples,
+    );
+    write_faults(out, status.faults.load(Ordering::Relaxed));
+    let (reason, detail) = board.last_reset();
+    let _ = write!(out, " last_reset={} detail=0x{detail:x}", reason.name());
+}
+
+/// Builds, checks and posts a controller for `candidate`; on success it becomes the settings.
+fn commit(
+    config: &Mailbox<LoopConfig>,
+    settings: &mut Settings,
+    candidate: Settings,
+    out: &mut Reply,
+) -> bool {
+    match candidate.transition_from(settings) {
+        Ok(cfg) => {
+            config.post(cfg);
+            *settings = candidate;
+            true
+        }
+        Err(e) => {
+            let _ = write!(out, "err {e}");
+            false
+        }
+    }
+}
+
+/// Where an upload stands.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum UploadStage {
+    Start,
+    Data,
+    End,
+    LineEnd,
+}
+
+/// A capture upload in progress: records `first .. first + count`.
+#[derive(Clone, Copy, Debug)]
+struct Upload {
+    first: u32,
+    count: u32,
+    total: u32,
+    rate_hz: u32,
+    sent: u32,
+    frames: u32,
+    seq: u16,
+    stage: UploadStage,
+}
+
+/// The command task's state: settings, the capture's consumer side, the line being
+/// assembled, the upload in progress.
+pub struct App<const N: usize> {
+    links: Links<'static>,
+    buffer: &'static CaptureBuffer<N>,
+    consumer: Consumer<N>,
+    settings: Settings,
+    line: [u8; command::MAX_LINE],
+    len: usize,
+    overlong: bool,
+    upload: Option<Upload>,
+}
+
+impl<const N: usize> App<N> {
+    /// The command task at boot.
+    pub fn new(
+        links: Links<'static>,
+        buffer: &'static CaptureBuffer<N>,
+        consumer: Consumer<N>,
+        settings: Settings,
+    ) -> Self {
+        Self {
+            links,
+            buffer,
+            consumer,
+            settings,
+            line: [0; command::MAX_LINE],
+            len: 0,
+            overlong: false,
+            upload: None,
+        }
+    }
+
+    /// The settings in force.
+    pub fn settings(&self) -> &Settings {
+        &self.settings
+    }
+
+    /// True while an upload has frames to send.
+    pub fn uploading(&self) -> bool {
+        self.upload.is_some()
+    }
+
+    /// Feeds one received byte. At the end of a non-empty line the command is handled and its
+    /// reply returned (the caller sends it, then `\r\n`). A `capture send` starts an upload
+    /// (a new one replaces one in progress).
+    pub fn feed(&mut self, b: u8, board: &mut impl Board) -> Option<Reply> {
+        if b != b'\n' && b != b'\r' {
+            match self.line.get_mut(self.len) {
+                Some(slot) => {
+                    *slot = b;
+                    self.len += 1;
+                }
+                None => self.overlong = true,
+            }
+            return None;
+        }
+        if self.len == 0 && !self.overlong {
+            return None; // empty line or the second half of CR LF
+        }
+        let mut out = Reply::new();
+        let parsed = if self.overlong {
+            Err(command::ParseError::TooLong)
+        } else {
+            core::str::from_utf8(self.line.get(..self.len).unwrap_or(&[]))
+                .map_err(|_| command::ParseError::TooLong)
+                .and_then(command::parse)
+        };
+        self.len = 0;
+        self.overlong = false;
+        let send = match parsed {
+            Ok(cmd) => self.handle(cmd, board, &mut out),
+            Err(e) => {
+                let _ = write!(out, "err {}", e.message());
+                None
+            }
+        };
+        if let Some((first, count)) = send
+            && let CaptureState::Done { len } = self.buffer.state()
+        {
+            self.upload = Some(Upload {
+                first,
+                count,
+                total: len,
+                rate_hz: (self.settings.rate_hz + 0.5) as u32,
+                sent: 0,
+                frames: 0,
+                seq: 0,
+                stage: UploadStage::Start,
+            });
+        }
+        Some(out)
+    }
+
+    /// The next bytes of the upload in progress (one frame, or the final line end) written
+    /// into `bytes`; `None` when no upload is in progress. Bounded: one frame per call.
+    pub fn next_upload_frame(&mut self, bytes: &mut [u8; frame::MAX_FRAME]) -> Option<usize> {
+        let mut up = self.upload?;
+        let n = match up.stage {
+            UploadStage::Start => {
+                up.stage = UploadStage::Data;
+                let start = FrameRef::Start {
+                    rate_hz: up.rate_hz,
+                    samples: up.total,
+                    first: up.first,
+                };
+                frame::encode(&start, up.seq, bytes).unwrap_or(0)
+            }
+            UploadStage::Data => {
+                let mut records = [Record::default(); frame::MAX_RECORDS];
+                let k = (up.count - up.sent).min(frame::MAX_RECORDS as u32) as usize;
+                let first = up.first + up.sent;
+                let ok = match records.get_mut(..k) {
+                    Some(chunk) if k > 0 => self.consumer.read(first, chunk).is_ok(),
+                    _ => false,
+                };
+                if !ok {
+                    up.stage = UploadStage::End;
+                    0
+                } else {
+                    up.seq = up.seq.wrapping_add(1);
+                    let data = FrameRef::Data {
+                        first_index: first,
+                        records: records.get(..k).unwrap_or(&[]),
+                    };
+                    up.sent += k as u32;
+                    up.frames += 1;
+                    if up.sent >= up.count {
+                        up.stage = UploadStage::End;
+                    }
+                    frame::encode(&data, up.seq, bytes).unwrap_or(0)
+                }
+            }
+            UploadStage::End => {
+                up.seq = up.seq.wrapping_add(1);
+                up.stage = UploadStage::LineEnd;
+                let end = FrameRef::End {
+                    samples_sent: up.sent,
+                    data_frames: up.frames,
+                };
+                frame::encode(&end, up.seq, bytes).unwrap_or(0)
+            }
+            UploadStage::LineEnd => {
+                self.upload = None;
+                if let Some(b) = bytes.get_mut(..2) {
+                    b.copy_from_slice(b"\r\n");
+                }
+                return Some(2);
+            }
+        };
+        self.upload = Some(up);
+        Some(n)
+    }
+
+    /// Handles one parsed command; writes the reply line (without line ending) into `out`.
+    /// Returns the capture range to send, if the command asked for one.
+    fn handle(
+        &mut self,
+        cmd: Command,
+        board: &mut impl Board,
+        out: &mut Reply,
+    ) -> Option<(u32, u32)> {
+        let links = self.links;
+        let settings = &mut self.settings;
+        let capture = &mut self.consumer;
+        let buffer = self.buffer;
+        match cmd {
+            Command::Help => {
+                let _ = write!(out, "ok {}", command::HELP);
+            }
+            Command::Status => status(out, settings, &links, board),
+            Command::Faults => {
+                let _ = write!(out, "ok ");
+                write_faults(out, links.status.faults.load(Ordering::Relaxed));
+            }
+            Command::Clear => {
+                links.requests.clear_faults();
+                links.stats.request_clear();
+                let _ = write!(out, "ok cleared");
+            }
+            Command::Mode(m) => {
+                let mode = match m {
+                    ModeRequest::Safe => Mode::Safe,
+                    ModeRequest::Open => Mode::OpenLoop,
+                    ModeRequest::Closed => Mode::ClosedLoop,
+                    ModeRequest::Hold => Mode::Hold,
+                };
+                links.requests.set_mode(mode);
+                let _ = write!(out, "ok mode {}", mode_name(Some(mode)));
+            }
+            Command::Reference(r) => {
+                if commit(
+                    links.config,
+                    settings,
+                    Settings {
+                        reference: r,
+                        ..*settings
+                    },
+                    out,
+                ) {
+                    let _ = write!(out, "ok ref");
+                }
+            }
+            Command::Kc(kc) => {
+                if commit(links.config, settings, Settings { kc, ..*settings }, out) {
+                    let _ = write!(out, "ok kc {kc}");
+                }
+            }
+            Command::Tau(tau_s) => {
+                if commit(links.config, settings, Settings { tau_s, ..*settings }, out) {
+                    let _ = write!(out, "ok tau_s {tau_s:e}");
+                }
+            }
+            Command::Feedforward(on) => {
+                if commit(
+                    links.config,
+                    settings,
+                    Settings {
+                        feedforward: on,
+                        ..*settings
+                    },
+                    out,
+                ) {
+                    let _ = write!(out, "ok ff {}", if on { "on" } else { "off" });
+                }
+            }
+            Command::Rate(rate_hz) => {
+                if links.status.mode() != Some(Mode::Safe) {
+                    let _ = write!(out, "err rate can only change in safe mode");
+                } else if !matches!(
+                    buffer.state(),
+                    CaptureState::Idle | CaptureState::Done { .. }
+                ) {
+                    let _ = write!(out, "err a capture is recording");
+                } else {
+                    match TimerSetting::for_rate(board.timer_clock_hz(), rate_hz, 32) {
+                        Err(_) => {
+                            let _ = write!(out, "err rate not reachable with the timer clock");
+                        }
+                        Ok(t) => {
+                            if commit(
+                                links.config,
+                                settings,
+                                Settings {
+                                    rate_hz: t.rate_hz,
+                                    ..*settings
+                                },
+                                out,
+                            ) {
+                                board.set_rate(&t);
+                                apply_rate_limits(&links, t.rate_hz, board.cpu_hz());
+                                let _ = write!(out, "ok rate_hz {:.3}", t.rate_hz);
+                            }
+                        }
+                    }
+                }
+            }
+            Command::Calibrate { gain, offset_v } => {
+                match scaling::AdcCalibration::new(gain, offset_v) {
+                    Ok(adc_cal) => {
+                        if commit(
+                            links.config,
+                            settings,
+                            Settings {
+                                adc_cal,
+                                ..*settings
+                            },
+                            out,
+                        ) {
+                            let _ = write!(out, "ok cal gain {gain} offset_v {offset_v}");
+                        }
+                    }
+                    Err(_) => {
+                        let _ = write!(out, "err calibration out of range");
+                    }
+                }
+            }
+            Command::Capture(CaptureRequest::Arm { duration_s }) => {
+                // Rounded to the nearest sample; `as` saturates, and the parser refused NaN.
+                let n = (duration_s * settings.rate_hz + 0.5) as u64;
+                if !(1..=design_parameters::CAPTURE_RECORDS as u64).contains(&n) {
+                    let _ = write!(
+                        out,
+                        "err capture holds at most {} samples ({:.3} s at this rate)",
+                        design_parameters::CAPTURE_RECORDS,
+                        design_parameters::CAPTURE_RECORDS as f64 / settings.rate_hz
+                    );
+                } else {
+                    let n = n as u32;
+                    match capture.arm(n) {
+                        Ok(()) => {
+                            let _ = write!(out, "ok capture armed {n}");
+                        }
+                        Err(_) => {
+                            let _ = write!(out, "err a capture is recording");
+                        }
+                    }
+                }
+            }
+            Command::Capture(CaptureRequest::Status) => {
+                let _ = match buffer.state() {
+                    CaptureState::Idle => write!(out, "ok capture idle"),
+                    CaptureState::Recording { len, target } => {
+                        write!(out, "ok capture recording {len} {target}")
+                    }
+                    CaptureState::Done { len } => {
+                        write!(out, "ok capture done {len} rate_hz {:.3}", settings.rate_hz)
+                    }
+                };
+            }
+            Command::Capture(CaptureRequest::Send { range }) => match buffer.state() {
+                CaptureState::Done { len } => {
+                    let (first, count) = range.unwrap_or((0, len));
+                    if u64::from(first) + u64::from(count) > u64::from(len) {
+                        let _ = write!(out, "err range outside the {len} samples captured");
+                    } else {
+                        let _ = write!(out, "ok sending {first} {count}");
+                        return Some((first, count));
+                    }
+                }
+                _ => {
+                    let _ = write!(out, "err no finished capture");
+                }
+            },
+        }
+        None
+    }
+}
