@@ -50,6 +50,26 @@ static UART_RX: StaticCell<[u8; 256]> = StaticCell::new();
 #[embassy_executor::main]
 async fn main(spawner: Spawner) {
     let p = embassy_stm32::init(board::config());
+    // The typed-in clocks (CPU_HZ: cycle counts in `status`; TIMER_CLOCK_HZ: the loop rate)
+    // must be the ones embassy set up (issue 13 item 9). If not, stay here: the DAC is not
+    // configured yet and the output switch's pull-down keeps the amplifier input at 0 V.
+    {
+        let clocks = embassy_stm32::rcc::clocks(&p.RCC);
+        let sys_hz = clocks.sys.to_hertz().map_or(0, |h| h.0);
+        let tim_hz = clocks.pclk1_tim.to_hertz().map_or(0, |h| h.0);
+        if sys_hz != board::CPU_HZ || tim_hz != board::TIMER_CLOCK_HZ {
+            defmt::error!(
+                "clock mismatch: sys {} Hz (expected {}), timers {} Hz (expected {}); loop not started",
+                sys_hz,
+                board::CPU_HZ,
+                tim_hz,
+                board::TIMER_CLOCK_HZ
+            );
+            loop {
+                cortex_m::asm::wfi();
+            }
+        }
+    }
     // Was the last reset the watchdog's? (RCC_RSR, cleared by RMVF.)
     let iwdg_reset = pac::RCC.rsr().read().iwdg1rstf();
     pac::RCC.rsr().modify(|w| w.set_rmvf(true));
