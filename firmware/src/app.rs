@@ -172,7 +172,10 @@ fn commit(
 ) -> bool {
     match candidate.transition_from(settings) {
         Ok(cfg) => {
-            config.post(cfg);
+            if !config.post(cfg) {
+                let _ = write!(out, "err the configuration mailbox is busy");
+                return false;
+            }
             *settings = candidate;
             true
         }

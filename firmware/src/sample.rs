@@ -305,7 +305,7 @@ mod tests {
         }
         .loop_config()
         .unwrap();
-        w.mailbox.post(cfg);
+        assert!(w.mailbox.post(cfg));
         w.requests.set_mode(Mode::OpenLoop);
         let mut last = 0.0;
         for _ in 0..4 {
@@ -338,7 +338,7 @@ mod tests {
         }
         .loop_config()
         .unwrap();
-        w.mailbox.post(cfg);
+        assert!(w.mailbox.post(cfg));
         w.requests.set_mode(Mode::OpenLoop);
         let raw = raw_of(5.0, &c.config);
         let mut last = 0.0;
@@ -400,7 +400,7 @@ mod tests {
         }
         .loop_config()
         .unwrap();
-        w.mailbox.post(cfg);
+        assert!(w.mailbox.post(cfg));
         w.requests.set_mode(Mode::OpenLoop);
         let raw = raw_of(1.0, &c.config);
         let mut sent = vec![];

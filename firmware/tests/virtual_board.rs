@@ -547,7 +547,7 @@ fn nan_reference_latches_nonfinite() {
     // The parser refuses "nan"; a corrupted configuration is the only way in: post one.
     let mut cfg = vb.core.config;
     cfg.reference_v = f32::NAN;
-    vb.links.config.post(cfg);
+    assert!(vb.links.config.post(cfg));
     vb.run_s(0.02);
     let (t, _) = time_to_safe(&vb, t0);
     println!("NaN reference: safe output after {:.2} ms", t * 1e3);
