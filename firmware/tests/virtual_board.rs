@@ -105,6 +105,9 @@ struct VirtualBoard {
     sensor: Sensor,
     noise_state: u32,
     switch_closed: bool,
+    /// The code computed in the previous sample: the interrupt sends it first thing (the DAC
+    /// frame at a fixed instant, one sample of computational delay; `hw/control.rs`).
+    next_code: model_core::DacCode,
     /// After an IWDG reset: the chip is in reset, the switch open (the fault tests end here).
     halted: bool,
     isr_alive: bool,
@@ -168,6 +171,7 @@ impl VirtualBoard {
             sensor: Sensor::Connected,
             noise_state: 0x1234_5678,
             switch_closed: false,
+            next_code: model_core::DacCode::from_volts(params::SAFE_OUTPUT_V as f32),
             halted: false,
             isr_alive: true,
             heartbeat_alive: true,
@@ -233,10 +237,12 @@ impl VirtualBoard {
         }
         if self.isr_alive {
             let raw = self.adc_raw();
+            let sent = self.next_code;
             let s = self.core.step(&self.links, raw);
             self.core.finish(&self.links, ISR_CYCLES, false);
+            self.next_code = s.dac;
             if self.switch_closed {
-                amp_in_v = s.dac.volts();
+                amp_in_v = sent.volts();
             }
         } else if self.switch_closed {
             amp_in_v = DacCodeHeld::get(self);
@@ -631,4 +637,28 @@ fn mode_safe_during_an_upload_is_applied_within_a_frame() {
     );
     assert!(applied < 0.005, "{applied}");
     assert_eq!(vb.rx_overflow, 0);
+}
+
+/// Issue 13 item 6: the DAC frame at a fixed instant costs one sample of delay. Its effect on
+/// the thesis loop's margins, measured with the host harness (`piezo loop`'s analysis) on the
+/// loop the board runs: the plant's 85 us plus one period.
+#[test]
+fn dac_at_a_fixed_instant_keeps_the_margins() {
+    use host_tests::sim::analysis::{LoopSetup, loop_figures};
+    let base = LoopSetup::thesis(params::SAMPLE_RATE_HZ, params::LAG_KC);
+    let mut fixed = base;
+    fixed.plant.delay_s += 1.0 / params::SAMPLE_RATE_HZ;
+    let a = loop_figures(&base).unwrap();
+    let b = loop_figures(&fixed).unwrap();
+    let (gm0, pm0) = (a.gain_margin_db.unwrap(), a.phase_margin_deg.unwrap());
+    let (gm1, pm1) = (b.gain_margin_db.unwrap(), b.phase_margin_deg.unwrap());
+    println!(
+        "DAC at a fixed instant (+20 us): gain margin {gm0:.2} -> {gm1:.2} dB, phase margin {pm0:.1} -> {pm1:.1} deg, bandwidth {:.0} -> {:.0} Hz, overshoot {:.1} -> {:.1} %",
+        a.bandwidth_hz.unwrap_or(f64::NAN),
+        b.bandwidth_hz.unwrap_or(f64::NAN),
+        a.step_overshoot_pct.unwrap_or(f64::NAN),
+        b.step_overshoot_pct.unwrap_or(f64::NAN),
+    );
+    // Our acceptance (issue 13): at least 6 dB and 45 deg remain.
+    assert!(gm1 > 6.0 && pm1 > 45.0, "{gm1} {pm1}");
 }

@@ -129,6 +129,7 @@ async fn main(spawner: Spawner) {
             capture: producer,
         },
         dac,
+        next: safe,
     });
 
     // 4. ADC on the timer's trigger; the control interrupt at the highest priority.
