@@ -144,7 +144,7 @@ fn status(out: &mut Reply, settings: &Settings, links: &Links<'_>, board: &impl 
     let cpu_hz = board.cpu_hz();
     let _ = write!(
         out,
-        "ok mode={} y_v={y:.4} r_v={r:.4} u_v={u:.4} rate_hz={:.0} kc={} tau_s={:e} ff={} cal_gain={} cal_offset_v={} isr_max_us={:.2} isr_mean_us={:.2} overruns={} dac_late={} samples={} ",
+        "ok mode={} y_v={y:.4} r_v={r:.4} u_v={u:.4} rate_hz={:.0} kc={} tau_s={:e} ff={} cal_gain={} cal_offset_v={} isr_max_us={:.2} isr_mean_us={:.2} dac_latency_max_us={:.2} overruns={} dac_late={} samples={} ",
         mode_name(mode),
         settings.rate_hz,
         settings.kc,
@@ -154,6 +154,11 @@ fn status(out: &mut Reply, settings: &Settings, links: &Links<'_>, board: &impl 
         settings.adc_cal.offset_v,
         scaling::cycles_to_us(st.max_cycles, cpu_hz),
         scaling::cycles_to_us(st.mean_cycles, cpu_hz),
+        dac_latency_us(
+            status.write_ticks_max.load(Ordering::Relaxed),
+            board.timer_clock_hz(),
+            settings.rate_hz
+        ),
         st.overruns,
         status.dac_late.load(Ordering::Relaxed),
         st.samples,
@@ -161,6 +166,14 @@ fn status(out: &mut Reply, settings: &Settings, links: &Links<'_>, board: &impl 
     write_faults(out, status.faults.load(Ordering::Relaxed));
     let (reason, detail) = board.last_reset();
     let _ = write!(out, " last_reset={} detail=0x{detail:x}", reason.name());
+}
+
+/// Sampling instant to DAC update, microseconds: the measured ticks to the write (timer
+/// clock), plus the one sample the code waits (it is sent at the next sample), plus the
+/// 16-bit frame at [`design_parameters::DAC_SPI_HZ`].
+pub fn dac_latency_us(write_ticks: u32, timer_clock_hz: u32, rate_hz: f64) -> f64 {
+    let frame_s = 16.0 / f64::from(design_parameters::DAC_SPI_HZ);
+    (f64::from(write_ticks) / f64::from(timer_clock_hz) + 1.0 / rate_hz + frame_s) * 1e6
 }
 
 /// Builds, checks and posts a controller for `candidate`; on success it becomes the settings.
@@ -386,6 +399,7 @@ impl<const N: usize> App<N> {
             Command::Clear => {
                 links.requests.clear_faults();
                 links.stats.request_clear();
+                links.status.clear_latency();
                 let _ = write!(out, "ok cleared");
             }
             Command::Mode(m) => {
@@ -534,5 +548,18 @@ impl<const N: usize> App<N> {
             },
         }
         None
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn dac_latency_adds_the_waiting_sample_and_the_frame() {
+        // 1.1 us to the write (220 ticks at 200 MHz), 20 us of waiting, 1.28 us of frame.
+        let us = dac_latency_us(220, 200_000_000, 50_000.0);
+        println!("latency at 50 kHz with the write 1.1 us after the sampling instant: {us:.2} us");
+        assert!((us - 22.38).abs() < 1e-9, "{us}");
     }
 }

@@ -85,6 +85,10 @@ pub struct Status {
     pub r: AtomicU32,
     /// Samples whose DAC frame was still in flight at the next sample.
     pub dac_late: AtomicU32,
+    /// Largest time from the sampling instant (the timer's update) to the DAC write, in
+    /// control-timer ticks, since the last `clear` (written by the interrupt, which reads the
+    /// timer's counter right after the write).
+    pub write_ticks_max: AtomicU32,
 }
 
 impl Status {
@@ -97,7 +101,22 @@ impl Status {
             u: AtomicU32::new(0),
             r: AtomicU32::new(0),
             dac_late: AtomicU32::new(0),
+            write_ticks_max: AtomicU32::new(0),
         }
+    }
+
+    /// Records one sample's timer ticks from the sampling instant to the DAC write (interrupt
+    /// side: the only writer apart from [`Status::clear_latency`]; no read-modify-write loop).
+    #[inline]
+    pub fn record_write_ticks(&self, ticks: u32) {
+        if ticks > self.write_ticks_max.load(Ordering::Relaxed) {
+            self.write_ticks_max.store(ticks, Ordering::Relaxed);
+        }
+    }
+
+    /// Forgets the largest latency (task side, on `clear`).
+    pub fn clear_latency(&self) {
+        self.write_ticks_max.store(0, Ordering::Relaxed);
     }
 
     /// The published mode.

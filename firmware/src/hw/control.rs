@@ -65,6 +65,8 @@ fn ADC() {
     let reading = adc::read();
     // The fixed instant: the previous sample's code.
     ctx.dac.write(ctx.next);
+    // Timer ticks since the sampling instant (TIM2 counts up from its update, the TRGO).
+    STATUS.record_write_ticks(embassy_stm32::pac::TIM2.cnt().read());
     let s = ctx.core.step(&LINKS, reading.raw);
     ctx.next = s.dac;
     let cycles = DWT::cycle_count().wrapping_sub(t0);
