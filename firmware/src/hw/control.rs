@@ -50,7 +50,11 @@ pub fn install(ctx: LoopContext) {
     critical_section::with(|cs| HANDOVER.borrow(cs).set(Some(ctx)));
 }
 
+// In ITCM (zero wait states, no cache misses): `memory.x`, copied by `super::load_itcm`.
+// What it calls and does not inline (the hysteresis inverse, `memcpy` of a new
+// configuration) stays in flash behind the instruction cache.
 #[interrupt]
+#[unsafe(link_section = ".itcm.adc")]
 fn ADC() {
     static mut CTX: Option<LoopContext> = None;
     let t0 = DWT::cycle_count();

@@ -40,6 +40,36 @@ use static_cell::StaticCell;
 use firmware::settings::Settings;
 use model_core::controller::{ControllerState, Faults};
 
+unsafe extern "C" {
+    /// Start of the ITCM code (linker script `memory.x`).
+    static __sitcm: u32;
+    /// End of the ITCM code.
+    static __eitcm: u32;
+    /// Where the ITCM code is stored in flash.
+    static __siitcm: u32;
+}
+
+/// Copies the `.itcm` code (the control interrupt's handler) from flash to ITCM. Called once
+/// at boot, before the interrupt is enabled. Bounded by the section's size.
+fn load_itcm() {
+    let mut dst = (&raw const __sitcm).cast_mut();
+    let end = &raw const __eitcm;
+    let mut src = &raw const __siitcm;
+    while dst.cast_const() < end {
+        // SAFETY: `__sitcm..__eitcm` is the `.itcm` section in ITCM (enabled at reset on the
+        // H743, word-aligned by `memory.x`) and `__siitcm` its load image in flash of the same
+        // length; nothing runs from ITCM yet (the interrupt is not enabled), so nothing reads
+        // the words while they are written.
+        unsafe {
+            dst.write_volatile(src.read_volatile());
+            dst = dst.add(1);
+            src = src.add(1);
+        }
+    }
+    cortex_m::asm::dsb();
+    cortex_m::asm::isb();
+}
+
 bind_interrupts!(struct Irqs {
     USART3 => usart::BufferedInterruptHandler<peripherals::USART3>;
 });
@@ -132,7 +162,10 @@ async fn main(spawner: Spawner) {
         next: safe,
     });
 
-    // 4. ADC on the timer's trigger; the control interrupt at the highest priority.
+    // 4. The handler's code into ITCM, then the ADC on the timer's trigger; the control
+    // interrupt at the highest priority.
+    load_itcm();
+    // ADC on the timer's trigger; the control interrupt at the highest priority.
     adc::init(p.ADC1, p.PA3);
     timer::init(p.TIM2, &setting);
     interrupt::ADC.set_priority(board::PRIO_CONTROL);
