@@ -35,6 +35,9 @@ pub trait Board {
     fn set_rate(&mut self, t: &TimerSetting);
     /// The last reset's reason and detail word.
     fn last_reset(&self) -> (ResetReason, u32);
+    /// A monotonic clock, microseconds (times the command handler, e.g. `Controller::new`'s
+    /// software f64 maths).
+    fn now_us(&self) -> u64;
 }
 
 /// Fault bits and their names, for `faults` and `status`.
@@ -232,6 +235,8 @@ pub struct App<const N: usize> {
     len: usize,
     overlong: bool,
     upload: Option<Upload>,
+    /// Longest command handling so far (building and checking a controller included), us.
+    handle_max_us: u64,
 }
 
 impl<const N: usize> App<N> {
@@ -251,6 +256,7 @@ impl<const N: usize> App<N> {
             len: 0,
             overlong: false,
             upload: None,
+            handle_max_us: 0,
         }
     }
 
@@ -291,6 +297,7 @@ impl<const N: usize> App<N> {
         };
         self.len = 0;
         self.overlong = false;
+        let t0_us = board.now_us();
         let send = match parsed {
             Ok(cmd) => self.handle(cmd, board, &mut out),
             Err(e) => {
@@ -298,6 +305,7 @@ impl<const N: usize> App<N> {
                 None
             }
         };
+        self.handle_max_us = self.handle_max_us.max(board.now_us().saturating_sub(t0_us));
         if let Some((first, count)) = send
             && let CaptureState::Done { len } = self.buffer.state()
         {
@@ -391,7 +399,10 @@ impl<const N: usize> App<N> {
             Command::Help => {
                 let _ = write!(out, "ok {}", command::HELP);
             }
-            Command::Status => status(out, settings, &links, board),
+            Command::Status => {
+                status(out, settings, &links, board);
+                let _ = write!(out, " cmd_max_us={}", self.handle_max_us);
+            }
             Command::Faults => {
                 let _ = write!(out, "ok ");
                 write_faults(out, links.status.faults.load(Ordering::Relaxed));

@@ -86,6 +86,10 @@ impl Board for VirtualBoardHw {
     fn last_reset(&self) -> (ResetReason, u32) {
         self.last_reset
     }
+    fn now_us(&self) -> u64 {
+        // Simulated time does not advance inside a task run; the board measures this.
+        0
+    }
 }
 
 /// One sample of the output trajectory.

@@ -33,6 +33,9 @@ impl Board for HwBoard {
     fn set_rate(&mut self, t: &TimerSetting) {
         timer::set_rate(t);
     }
+    fn now_us(&self) -> u64 {
+        embassy_time::Instant::now().as_micros()
+    }
     fn last_reset(&self) -> (ResetReason, u32) {
         let reason =
             ResetReason::from_code(super::safe_state::LAST_RESET_REASON.load(Ordering::Relaxed))
