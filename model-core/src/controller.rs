@@ -34,7 +34,7 @@
 //! [`ControllerState::clear_faults`] (an explicit command) clears them, after which the mode
 //! is `Safe`. `Safe` mode ramps at the same rate. Detected here: sensor out of range (monitor
 //! outside -0.5..10.5 V), sensor stuck (the code stays within a noise band of
-//! +-[`params::SENSOR_STUCK_BAND_LSB`] for 5 ms while the command moved 0.1 V; the window
+//! +-[`params::SENSOR_STUCK_BAND_LSB`] for 5 ms after the command moved 0.1 V; a quiet window
 //! restarts every 10 ms, so the slow command changes that compensate drift at a regulated
 //! set-point never count; in closed loop it counts only while the error exceeds
 //! [`params::SENSOR_STUCK_ERROR_V`], so disturbance rejection never counts), saturated (in closed loop, the command held at a window edge for
@@ -333,6 +333,7 @@ impl Controller {
             st.entering = false;
             // A mode change re-anchors the stuck detector's window at the command in force.
             st.frozen_samples = 0;
+            st.moved_samples = 0;
             st.command_at_freeze = st.lag.output_v();
             st.last_error_v = 0.0;
             if st.mode == Mode::ClosedLoop {
@@ -421,16 +422,26 @@ impl Controller {
         // unless the error persists (the loop asks the sensor to move and it does not).
         let asks_to_move = st.mode != Mode::ClosedLoop
             || st.last_error_v.abs() > params::SENSOR_STUCK_ERROR_V as f32;
-        if in_band && asks_to_move && st.frozen_samples < 2 * params::SENSOR_STUCK_SAMPLES {
+        let moved = (command - st.command_at_freeze).abs() > params::SENSOR_STUCK_COMMAND_V as f32;
+        if in_band
+            && asks_to_move
+            && (moved || st.frozen_samples < 2 * params::SENSOR_STUCK_SAMPLES)
+        {
             st.frozen_samples = st.frozen_samples.saturating_add(1);
-            if st.frozen_samples >= params::SENSOR_STUCK_SAMPLES
-                && (command - st.command_at_freeze).abs() > params::SENSOR_STUCK_COMMAND_V as f32
-            {
-                st.faults = st.faults | Faults::SENSOR_STUCK;
+            // Counted from the command's move on: the sensor had SENSOR_STUCK_SAMPLES to
+            // follow (the loop's own delay is a few samples), so a step after a long quiet
+            // stretch is not mistaken for a stuck sensor.
+            if moved {
+                st.moved_samples = st.moved_samples.saturating_add(1);
+                if st.moved_samples >= params::SENSOR_STUCK_SAMPLES {
+                    st.faults = st.faults | Faults::SENSOR_STUCK;
+                }
             }
         } else {
-            // Out of the band, or the window is full: a new window from here.
+            // Out of the band (the sensor follows), or a quiet window is full: a new window
+            // from here.
             st.frozen_samples = 0;
+            st.moved_samples = 0;
             st.command_at_freeze = command;
             st.last_adc = adc;
         }
@@ -451,6 +462,7 @@ pub struct ControllerState {
     last_reference_v: f32,
     last_adc: AdcCode,
     frozen_samples: u32,
+    moved_samples: u32,
     command_at_freeze: f32,
     edge_samples: u32,
     last_error_v: f32,
@@ -472,6 +484,7 @@ impl ControllerState {
             last_reference_v: 0.0,
             last_adc: AdcCode::MIN,
             frozen_samples: 0,
+            moved_samples: 0,
             command_at_freeze: safe,
             edge_samples: 0,
             last_error_v: 0.0,
@@ -513,6 +526,7 @@ impl ControllerState {
         self.faults = Faults::NONE;
         self.mode = Mode::Safe;
         self.frozen_samples = 0;
+        self.moved_samples = 0;
         self.edge_samples = 0;
         self.command_at_freeze = self.lag.output_v();
         if !self.reference_v.is_finite() {
@@ -727,6 +741,23 @@ mod tests {
         for n in 0..50_000u32 {
             st.set_reference(5.0 + n as f32 * 4e-5);
             let s = c.step(&mut st, AdcCode(y + [0i16, 2, -2][(n % 3) as usize]));
+            assert!(s.faults.is_empty(), "sample {n}: {:?}", s.faults);
+        }
+    }
+
+    #[test]
+    fn a_step_after_a_long_quiet_stretch_is_not_stuck() {
+        // A noise-free sensor that follows the command 4 samples late (the loop's delay),
+        // quiet for 1 s, then a 4 V step: the sensor follows, no fault.
+        let c = Controller::new(&ControllerConfig::default()).unwrap();
+        let mut st = ControllerState::new(&c);
+        st.set_mode(Mode::OpenLoop);
+        let mut history = [0.0f32; 4];
+        for n in 0..100_000u32 {
+            st.set_reference(if n < 50_000 { 1.0 } else { 5.0 });
+            let y = history[(n % 4) as usize];
+            let s = c.step(&mut st, AdcCode::from_volts(y));
+            history[(n % 4) as usize] = s.command_v;
             assert!(s.faults.is_empty(), "sample {n}: {:?}", s.faults);
         }
     }

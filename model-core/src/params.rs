@@ -105,7 +105,7 @@ pub const SENSOR_VALID_MIN_V: f64 = -0.5;
 /// Highest plausible sensor reading, volts (over-range above this).
 pub const SENSOR_VALID_MAX_V: f64 = 10.5;
 /// A sensor is stuck if its code stays within +-[`SENSOR_STUCK_BAND_LSB`] of where it was for
-/// this many samples (5 ms at 50 kHz) while the command moves by more than
+/// this many samples (5 ms at 50 kHz) after the command moved by more than
 /// [`SENSOR_STUCK_COMMAND_V`]. A live E-509 answers such a move with about 260 codes, so a
 /// code held inside the noise band while the command moves is a fault.
 pub const SENSOR_STUCK_SAMPLES: u32 = 250;
