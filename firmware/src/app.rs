@@ -237,6 +237,107 @@ pub struct App<const N: usize> {
     upload: Option<Upload>,
     /// Longest command handling so far (building and checking a controller included), us.
     handle_max_us: u64,
+    /// A `selftest` asked for by the last command, to start after it.
+    selftest_requested: bool,
+    /// The self-test in progress.
+    selftest: Option<SelfTest>,
+}
+
+/// What the self-test measured at one level.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct LevelFigures {
+    /// Mean command over the second half of the capture, volts.
+    pub u_mean_v: f64,
+    /// Mean read-back, volts.
+    pub y_mean_v: f64,
+    /// RMS noise of the read-back, volts.
+    pub y_rms_v: f64,
+    /// Samples from the command's first change to the read-back passing half the step.
+    pub latency_samples: u32,
+}
+
+/// A self-test in progress: the settings to restore and the figures so far.
+#[derive(Clone, Copy, Debug)]
+struct SelfTest {
+    level: usize,
+    restore: Settings,
+    figures: [LevelFigures; design_parameters::SELFTEST_LEVELS_V.len()],
+}
+
+/// Square root by Newton's iteration (no `std`); 0 for non-positive input.
+fn sqrt(x: f64) -> f64 {
+    if x <= 0.0 || !x.is_finite() {
+        return 0.0;
+    }
+    let mut r = if x > 1.0 { x } else { 1.0 };
+    for _ in 0..64 {
+        r = 0.5 * (r + x / r);
+    }
+    r
+}
+
+/// The figures of one level from its capture: `sample(i)` gives the command and the
+/// read-back of sample `i` in volts, `n` samples in all. Two passes, no buffer.
+pub fn level_figures(sample: impl Fn(usize) -> (f64, f64), n: usize) -> LevelFigures {
+    let half = n / 2;
+    let (u0, y0) = sample(0);
+    let (mut su, mut sy, mut syy, mut k) = (0.0, 0.0, 0.0, 0.0);
+    let mut u_end = u0;
+    for i in 0..n {
+        let (u, y) = sample(i);
+        if i >= half {
+            su += u;
+            sy += y;
+            syy += y * y;
+            k += 1.0;
+        }
+        u_end = u;
+    }
+    // The capture starts with the sample that already computes the new level, while the
+    // read-back still shows the old one: both crossings are taken against `y0`.
+    let mut iu = None;
+    let mut iy = None;
+    let threshold = 0.5 * (u_end - y0).abs();
+    for i in 0..n {
+        let (u, y) = sample(i);
+        if iu.is_none() && (u - y0).abs() > threshold {
+            iu = Some(i);
+        }
+        if iy.is_none() && iu.is_some() && (y - y0).abs() > threshold {
+            iy = Some(i);
+            break;
+        }
+    }
+    let latency_samples = match (iu, iy) {
+        (Some(a), Some(b)) => (b - a) as u32,
+        _ => u32::MAX,
+    };
+    let k = if k > 0.0 { k } else { 1.0 };
+    let y_mean_v = sy / k;
+    LevelFigures {
+        u_mean_v: su / k,
+        y_mean_v,
+        y_rms_v: sqrt(syy / k - y_mean_v * y_mean_v),
+        latency_samples,
+    }
+}
+
+/// Least-squares gain and offset of read-back against command over the levels.
+pub fn fit_gain_offset(f: &[LevelFigures]) -> (f64, f64) {
+    let n = f.len() as f64;
+    let (mut su, mut sy, mut suu, mut suy) = (0.0, 0.0, 0.0, 0.0);
+    for l in f {
+        su += l.u_mean_v;
+        sy += l.y_mean_v;
+        suu += l.u_mean_v * l.u_mean_v;
+        suy += l.u_mean_v * l.y_mean_v;
+    }
+    let d = n * suu - su * su;
+    if d == 0.0 {
+        return (0.0, 0.0);
+    }
+    let gain = (n * suy - su * sy) / d;
+    (gain, (sy - gain * su) / n)
 }
 
 impl<const N: usize> App<N> {
@@ -257,6 +358,8 @@ impl<const N: usize> App<N> {
             overlong: false,
             upload: None,
             handle_max_us: 0,
+            selftest_requested: false,
+            selftest: None,
         }
     }
 
@@ -306,6 +409,19 @@ impl<const N: usize> App<N> {
             }
         };
         self.handle_max_us = self.handle_max_us.max(board.now_us().saturating_sub(t0_us));
+        if core::mem::take(&mut self.selftest_requested) {
+            let restore = self.settings;
+            self.selftest = Some(SelfTest {
+                level: 0,
+                restore,
+                figures: Default::default(),
+            });
+            if let Err(e) = self.start_level(0) {
+                self.selftest = None;
+                out = Reply::new();
+                let _ = write!(out, "err selftest: {e}");
+            }
+        }
         if let Some((first, count)) = send
             && let CaptureState::Done { len } = self.buffer.state()
         {
@@ -320,6 +436,103 @@ impl<const N: usize> App<N> {
                 stage: UploadStage::Start,
             });
         }
+        Some(out)
+    }
+
+    /// Posts the level `i` of the self-test (open loop) and arms its capture.
+    fn start_level(&mut self, i: usize) -> Result<(), &'static str> {
+        let level_v = *design_parameters::SELFTEST_LEVELS_V
+            .get(i)
+            .ok_or("no such level")?;
+        let candidate = Settings {
+            reference: command::ReferenceRequest::Step { level_v },
+            ..self.settings
+        };
+        let cfg = candidate
+            .transition_from(&self.settings)
+            .map_err(|_| "the level's configuration was refused")?;
+        if !self.links.config.post(cfg) {
+            return Err("the configuration mailbox is busy");
+        }
+        self.settings = candidate;
+        self.links.requests.set_mode(Mode::OpenLoop);
+        self.consumer
+            .arm(design_parameters::SELFTEST_SAMPLES)
+            .map_err(|_| "the capture could not be armed")
+    }
+
+    /// Advances a running self-test; returns its final reply once it is over. Call at every
+    /// wake of the command task. Bounded: reads one level's capture (2000 records, in
+    /// frames of 30) per call at most.
+    pub fn poll(&mut self, board: &impl Board) -> Option<Reply> {
+        let mut st = self.selftest?;
+        let CaptureState::Done { len } = self.buffer.state() else {
+            return None;
+        };
+        let n = (len as usize).min(design_parameters::SELFTEST_SAMPLES as usize);
+        let consumer = &self.consumer;
+        let sample = |i: usize| {
+            let mut r = [Record::default()];
+            let _ = consumer.read(i as u32, &mut r);
+            (
+                f64::from(DacCode::new(r[0].u).volts()),
+                f64::from(AdcCode(r[0].y).volts()),
+            )
+        };
+        let figures = level_figures(sample, n);
+        if let Some(f) = st.figures.get_mut(st.level) {
+            *f = figures;
+        }
+        st.level += 1;
+        self.selftest = Some(st);
+        let faults = self.links.status.faults.load(Ordering::Relaxed);
+        if st.level < st.figures.len() && faults == 0 {
+            if let Err(e) = self.start_level(st.level) {
+                self.selftest = None;
+                let mut out = Reply::new();
+                let _ = write!(out, "err selftest: {e}");
+                return Some(out);
+            }
+            return None;
+        }
+        // Over: back to safe and the settings from before.
+        self.selftest = None;
+        self.links.requests.set_mode(Mode::Safe);
+        if let Ok(cfg) = st.restore.transition_from(&self.settings)
+            && self.links.config.post(cfg)
+        {
+            self.settings = st.restore;
+        }
+        let (gain, offset_v) = fit_gain_offset(&st.figures);
+        let noise_v = st.figures.iter().map(|f| f.y_rms_v).fold(0.0, f64::max);
+        let latency = st
+            .figures
+            .iter()
+            .map(|f| f.latency_samples)
+            .max()
+            .unwrap_or(u32::MAX);
+        let isr_max_us = f64::from(scaling::cycles_to_us(
+            self.links.stats.snapshot().max_cycles,
+            board.cpu_hz(),
+        ));
+        let period_us = 1e6 / self.settings.rate_hz;
+        let pass = faults == 0
+            && (gain - 1.0).abs() <= design_parameters::SELFTEST_MAX_GAIN_ERROR
+            && offset_v.abs() <= design_parameters::SELFTEST_MAX_OFFSET_V
+            && noise_v <= design_parameters::SELFTEST_MAX_NOISE_V
+            && latency <= design_parameters::SELFTEST_MAX_LATENCY_SAMPLES
+            && isr_max_us <= design_parameters::SELFTEST_MAX_ISR_FRACTION * period_us;
+        let mut out = Reply::new();
+        let _ = write!(
+            out,
+            "ok selftest {} gain={gain:.5} offset_v={offset_v:.5} noise_rms_v={noise_v:.6} latency_samples={latency} isr_max_us={isr_max_us:.2} faults=0x{faults:02x} (limits: gain 1+-{}, offset +-{} V, noise {} V, latency {} samples, isr {} of the period)",
+            if pass { "pass" } else { "fail" },
+            design_parameters::SELFTEST_MAX_GAIN_ERROR,
+            design_parameters::SELFTEST_MAX_OFFSET_V,
+            design_parameters::SELFTEST_MAX_NOISE_V,
+            design_parameters::SELFTEST_MAX_LATENCY_SAMPLES,
+            design_parameters::SELFTEST_MAX_ISR_FRACTION,
+        );
         Some(out)
     }
 
@@ -542,6 +755,30 @@ impl<const N: usize> App<N> {
                         write!(out, "ok capture done {len} rate_hz {:.3}", settings.rate_hz)
                     }
                 };
+            }
+            Command::SelfTest => {
+                if links.status.mode() != Some(Mode::Safe)
+                    || links.status.faults.load(Ordering::Relaxed) != 0
+                {
+                    let _ = write!(
+                        out,
+                        "err selftest runs from safe mode without faults (loopback cable, amplifier disconnected)"
+                    );
+                } else if self.selftest.is_some()
+                    || !matches!(
+                        buffer.state(),
+                        CaptureState::Idle | CaptureState::Done { .. }
+                    )
+                {
+                    let _ = write!(out, "err a capture or a selftest is running");
+                } else {
+                    self.selftest_requested = true;
+                    let _ = write!(
+                        out,
+                        "ok selftest running ({} levels)",
+                        design_parameters::SELFTEST_LEVELS_V.len()
+                    );
+                }
             }
             Command::Capture(CaptureRequest::Send { range }) => match buffer.state() {
                 CaptureState::Done { len } => {

@@ -102,3 +102,23 @@ pub const ADC_PULL_RAIL_V: f64 = -15.0;
 pub const CAL_MAX_GAIN_ERROR: f64 = 0.1;
 /// Largest offset correction a `cal` command may set, volts (our assumption).
 pub const CAL_MAX_OFFSET_V: f64 = 0.5;
+
+// ----- `selftest` over a loopback cable (issue 13, bring-up; all our assumptions). -----
+/// Levels the self-test steps through, volts at the amplifier input (open loop); with the
+/// loopback cable the front end reads them back.
+pub const SELFTEST_LEVELS_V: [f64; 3] = [1.0, 5.0, 9.0];
+/// Samples captured per level from the step on; the second half gives the statistics, the
+/// first the latency.
+pub const SELFTEST_SAMPLES: u32 = 2000;
+/// Largest gain error of the loopback (DAC stage -> front end) for a pass.
+pub const SELFTEST_MAX_GAIN_ERROR: f64 = 0.01;
+/// Largest offset of the loopback for a pass, volts.
+pub const SELFTEST_MAX_OFFSET_V: f64 = 0.02;
+/// Largest RMS noise of the read-back at a level for a pass, volts (the E-509's own noise is
+/// 2.5 mV; the converters alone should be well under 1 mV).
+pub const SELFTEST_MAX_NOISE_V: f64 = 1.0e-3;
+/// Largest latency from the computed code to its read-back for a pass, samples (one sample
+/// waiting for the fixed DAC instant, one to the next conversion, one of margin).
+pub const SELFTEST_MAX_LATENCY_SAMPLES: u32 = 3;
+/// Largest interrupt time for a pass, as a fraction of the period.
+pub const SELFTEST_MAX_ISR_FRACTION: f64 = 0.5;

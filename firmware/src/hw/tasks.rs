@@ -65,6 +65,10 @@ pub async fn command_task(
         .await;
     loop {
         LIVENESS.check_in(TASK_COMMAND);
+        if let Some(reply) = app.poll(&board) {
+            let _ = uart.write_all(reply.as_bytes()).await;
+            let _ = uart.write_all(b"\r\n").await;
+        }
         let wait = match app.next_upload_frame(&mut frame_bytes) {
             Some(n) => {
                 let _ = uart.write_all(frame_bytes.get(..n).unwrap_or(&[])).await;
