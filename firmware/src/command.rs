@@ -124,6 +124,8 @@ pub enum Command {
     },
     /// `capture ...`.
     Capture(CaptureRequest),
+    /// `selftest`: the loopback bring-up test (`app` module).
+    SelfTest,
 }
 
 /// Why a line was refused; [`ParseError::message`] is the reply text.
@@ -170,7 +172,7 @@ impl ParseError {
 pub const HELP: &str = "commands: mode safe|open|closed|hold; ref step LEVEL; ref sine OFFSET AMPL FREQ; \
 ref triangle OFFSET AMPL FREQ (levels in um or v, FREQ in hz or khz); kc VALUE; tau VALUE(s|ms|us); \
 ff on|off; rate FREQ (safe mode only); cal GAIN OFFSET(v); status; faults; clear; capture DURATION(s|ms); capture status; \
-capture send [FIRST COUNT]";
+capture send [FIRST COUNT]; selftest (loopback cable, amplifier disconnected)";
 
 /// The units a number may carry.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -302,6 +304,7 @@ pub fn parse(line: &str) -> Result<Command, ParseError> {
         "status" => none(Command::Status),
         "faults" => none(Command::Faults),
         "clear" => none(Command::Clear),
+        "selftest" => none(Command::SelfTest),
         "mode" => match args {
             ["safe"] => Ok(Command::Mode(ModeRequest::Safe)),
             ["open"] => Ok(Command::Mode(ModeRequest::Open)),

@@ -15,6 +15,21 @@
 
 use core::sync::atomic::{AtomicU32, Ordering};
 
+use crate::design_parameters::{SUPERVISOR_PERIOD_S, TASK_STALL_S};
+use model_core::params::MIN_SAMPLE_RATE_HZ;
+
+/// Samples without a complete round of check-ins before the interrupt raises WATCHDOG, at
+/// `rate_hz` ([`TASK_STALL_S`] of samples).
+pub fn stall_samples(rate_hz: f64) -> u32 {
+    (TASK_STALL_S * rate_hz) as u32
+}
+
+/// Fewest samples a healthy interrupt produces in one supervisor period, at any allowed rate:
+/// half a period's worth at the slowest rate.
+pub fn min_advance() -> u32 {
+    (SUPERVISOR_PERIOD_S * MIN_SAMPLE_RATE_HZ / 2.0) as u32
+}
+
 /// Check-in bit of the command task.
 pub const TASK_COMMAND: u32 = 1;
 /// Check-in bit of the heartbeat task.
@@ -191,6 +206,117 @@ mod tests {
         assert_eq!(
             l.supervise(&mut last, 250, 2500),
             Verdict::IsrStalled { advanced: 0 }
+        );
+    }
+
+    /// What the simulation of [`boot_and_run`] saw.
+    #[derive(Debug)]
+    struct Run {
+        watchdog_raised_at_s: Option<f64>,
+        longest_feed_gap_s: f64,
+        feeds: u32,
+    }
+
+    /// The firmware's schedule with the real constants, sample by sample from boot: the
+    /// interrupt ticks from t = 0; at `BOOT_LOOP_TO_TASKS_S` the tasks start (spawn order:
+    /// command, heartbeat, supervisor; the supervisor unleashes the IWDG at its first run);
+    /// the command and heartbeat tasks check in every `TASK_CHECK_IN_S` (with their phases),
+    /// the supervisor runs every `SUPERVISOR_PERIOD_S`. `stop_heartbeat_s` stops the heartbeat.
+    fn boot_and_run(
+        rate_hz: f64,
+        seconds: f64,
+        phase_s: (f64, f64, f64),
+        stop_heartbeat_s: f64,
+    ) -> Run {
+        use crate::design_parameters::{BOOT_LOOP_TO_TASKS_S, TASK_CHECK_IN_S};
+        let l = Liveness::new();
+        let stall = stall_samples(rate_hz);
+        let min = min_advance();
+        let dt = 1.0 / rate_hz;
+        let n_total = (seconds * rate_hz) as u64;
+        let start = BOOT_LOOP_TO_TASKS_S;
+        let (mut next_cmd, mut next_hb, mut next_sup) =
+            (start + phase_s.0, start + phase_s.1, start + phase_s.2);
+        let mut last = 0u32;
+        let mut unleashed_at: Option<f64> = None;
+        let mut last_feed = 0.0;
+        let mut run = Run {
+            watchdog_raised_at_s: None,
+            longest_feed_gap_s: 0.0,
+            feeds: 0,
+        };
+        for n in 0..n_total {
+            let t = n as f64 * dt;
+            if l.isr_tick(stall) && run.watchdog_raised_at_s.is_none() {
+                run.watchdog_raised_at_s = Some(t);
+            }
+            while next_cmd <= t {
+                l.check_in(TASK_COMMAND);
+                next_cmd += TASK_CHECK_IN_S;
+            }
+            while next_hb <= t && t < stop_heartbeat_s {
+                l.check_in(TASK_HEARTBEAT);
+                next_hb += TASK_CHECK_IN_S;
+            }
+            while next_sup <= t {
+                if unleashed_at.is_none() {
+                    unleashed_at = Some(t);
+                    last_feed = t;
+                }
+                if l.supervise(&mut last, min, stall) == Verdict::Feed {
+                    run.longest_feed_gap_s = run.longest_feed_gap_s.max(t - last_feed);
+                    last_feed = t;
+                    run.feeds += 1;
+                }
+                next_sup += SUPERVISOR_PERIOD_S;
+            }
+            if unleashed_at.is_some() {
+                run.longest_feed_gap_s = run.longest_feed_gap_s.max(t - last_feed);
+            }
+        }
+        run
+    }
+
+    #[test]
+    fn real_timings_never_raise_watchdog_and_feed_every_iwdg_window() {
+        use crate::design_parameters::IWDG_TIMEOUT_S;
+        use model_core::params::{MAX_SAMPLE_RATE_HZ, SAMPLE_RATE_HZ};
+        for rate_hz in [MIN_SAMPLE_RATE_HZ, SAMPLE_RATE_HZ, MAX_SAMPLE_RATE_HZ] {
+            for phase_s in [
+                (0.0, 0.0, 0.0),
+                (0.0097, 0.0031, 0.0),
+                (0.0, 0.0099, 0.0001),
+            ] {
+                let r = boot_and_run(rate_hz, 3.0, phase_s, f64::INFINITY);
+                println!(
+                    "rate {rate_hz} Hz, phases {phase_s:?}: watchdog {:?}, {} feeds, longest gap {:.1} ms (IWDG {} ms)",
+                    r.watchdog_raised_at_s,
+                    r.feeds,
+                    r.longest_feed_gap_s * 1e3,
+                    IWDG_TIMEOUT_S * 1e3
+                );
+                assert_eq!(r.watchdog_raised_at_s, None, "rate {rate_hz} Hz");
+                assert!(r.longest_feed_gap_s < IWDG_TIMEOUT_S / 2.0, "{r:?}");
+                assert!(r.feeds > 250, "{r:?}");
+            }
+        }
+    }
+
+    #[test]
+    fn real_timings_a_stalled_heartbeat_raises_watchdog_before_the_iwdg_bites() {
+        use crate::design_parameters::IWDG_TIMEOUT_S;
+        use model_core::params::SAMPLE_RATE_HZ;
+        let r = boot_and_run(SAMPLE_RATE_HZ, 1.0, (0.0, 0.0, 0.0), 0.5);
+        let raised = r.watchdog_raised_at_s.expect("the interrupt notices");
+        println!(
+            "heartbeat stops at 500 ms: WATCHDOG at {:.1} ms, longest feed gap {:.1} ms",
+            raised * 1e3,
+            r.longest_feed_gap_s * 1e3
+        );
+        assert!(raised > 0.5 && raised < 0.5 + TASK_STALL_S + SUPERVISOR_PERIOD_S);
+        assert!(
+            r.longest_feed_gap_s >= IWDG_TIMEOUT_S,
+            "the IWDG bites: {r:?}"
         );
     }
 }

@@ -112,6 +112,35 @@ impl AdcCalibration {
     }
 }
 
+/// The README's ADC front end as a circuit model (f64), for the host tests and the virtual
+/// board: the voltage at the pin for a driven input `Some(volts)` or an unplugged one
+/// (`None`). Driven, the source sets the input node and the pull resistor only loads the
+/// source; open, the node settles where the pull resistor ([`design_parameters::ADC_R_PULL_OHM`]
+/// to [`design_parameters::ADC_PULL_RAIL_V`]) meets the network seen through R1 (Thevenin:
+/// `VREF R3/(R2+R3)` behind `R1 + R2||R3`).
+pub fn front_end_pin_v(input_v: Option<f64>) -> f64 {
+    use design_parameters::{
+        ADC_PULL_RAIL_V, ADC_R_GND_OHM, ADC_R_IN_OHM, ADC_R_PULL_OHM, ADC_R_REF_OHM, ADC_VREF_V,
+    };
+    let (g_in, g_ref, g_gnd) = (1.0 / ADC_R_IN_OHM, 1.0 / ADC_R_REF_OHM, 1.0 / ADC_R_GND_OHM);
+    let node_v = match input_v {
+        Some(v) => v,
+        None => {
+            let v_th = ADC_VREF_V * g_ref / (g_ref + g_gnd);
+            let r_th = ADC_R_IN_OHM + 1.0 / (g_ref + g_gnd);
+            (v_th / r_th + ADC_PULL_RAIL_V / ADC_R_PULL_OHM) / (1.0 / r_th + 1.0 / ADC_R_PULL_OHM)
+        }
+    };
+    (node_v * g_in + ADC_VREF_V * g_ref) / (g_in + g_ref + g_gnd)
+}
+
+/// The right-aligned 16-bit result the ADC gives for `pin_v` (clamped to the rails).
+pub fn adc_raw_of_pin(pin_v: f64) -> u32 {
+    let vref = design_parameters::ADC_VREF_V;
+    // `as` truncates: the floor, for the non-negative values left after the clamp.
+    (pin_v / vref * 65536.0).clamp(0.0, 65535.0) as u32
+}
+
 /// The 12-bit value for the internal DAC: the 14-bit offset-binary code without its two
 /// least significant bits.
 #[inline]
@@ -319,5 +348,52 @@ mod tests {
         );
         assert!((cycles_to_us(400, 400_000_000) - 1.0).abs() < 1e-6);
         assert_eq!(cycles_to_us(400, 0), 0.0);
+    }
+
+    /// Issue 13 item 2: an unplugged sensor must read outside the controller's plausible
+    /// range (it read 1.98 V before the pull resistor), through the pin and the default
+    /// calibration, and the controller must latch SENSOR_RANGE on it at the first sample.
+    #[test]
+    fn open_input_reads_out_of_range_and_latches_sensor_range() {
+        use model_core::controller::{Controller, ControllerConfig, ControllerState, Faults, Mode};
+        let pin = front_end_pin_v(None);
+        let vref = design_parameters::ADC_VREF_V;
+        assert!(
+            pin > 0.05 && pin < vref - 0.05,
+            "the ADC still reads it: {pin} V"
+        );
+        let y = f64::from(
+            AdcCalibration::front_end_default()
+                .apply(adc_raw_of_pin(pin))
+                .volts(),
+        );
+        let old_open_pin = vref * design_parameters::ADC_R_GND_OHM
+            / (design_parameters::ADC_R_REF_OHM + design_parameters::ADC_R_GND_OHM);
+        let old_y = f64::from(
+            AdcCalibration::front_end_default()
+                .apply(adc_raw_of_pin(old_open_pin))
+                .volts(),
+        );
+        println!(
+            "open input: pin {pin:.3} V, reads {y:.3} V (valid {}..{} V); without the pull resistor it read {old_y:.3} V",
+            params::SENSOR_VALID_MIN_V,
+            params::SENSOR_VALID_MAX_V
+        );
+        assert!(y < params::SENSOR_VALID_MIN_V - 1.0, "{y}");
+        // Connected, the pull resistor changes nothing: 0 and 10 V read back as before.
+        for v in [0.0, 5.0, 10.0] {
+            let got = f64::from(
+                AdcCalibration::front_end_default()
+                    .apply(adc_raw_of_pin(front_end_pin_v(Some(v))))
+                    .volts(),
+            );
+            assert!((got - v).abs() < 1e-3, "{v} -> {got}");
+        }
+        let c = Controller::new(&ControllerConfig::default()).unwrap();
+        let mut st = ControllerState::new(&c);
+        st.set_mode(Mode::ClosedLoop);
+        st.set_reference(5.0);
+        let s = c.step(&mut st, AdcCode::from_volts(y as f32));
+        assert!(s.faults.contains(Faults::SENSOR_RANGE));
     }
 }

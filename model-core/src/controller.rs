@@ -28,12 +28,19 @@
 //! * `Hold`: the command stays where it is.
 //!
 //! # Faults
-//! Checked every sample; any fault latches, the command ramps to the safe value at the slew
-//! limit, and only [`ControllerState::clear_faults`] (an explicit command) clears them, after
-//! which the mode is `Safe`. Detected here: sensor out of range (monitor outside
-//! -0.5..10.5 V), sensor stuck (code frozen for 5 ms while the command moved 0.1 V), a
-//! non-finite reference or an internal NaN. Raised by the firmware with
-//! [`ControllerState::raise`]: interrupt overrun, watchdog.
+//! Checked every sample; any fault latches, the command ramps to the safe value at the safe
+//! ramp rate ([`ControllerConfig::safe_ramp_v_per_s`], default 1 V/ms, far below the slew
+//! limit: a full-slew ramp rang the stage, issue 13 item 4), and only
+//! [`ControllerState::clear_faults`] (an explicit command) clears them, after which the mode
+//! is `Safe`. `Safe` mode ramps at the same rate. Detected here: sensor out of range (monitor
+//! outside -0.5..10.5 V), sensor stuck (the code stays within a noise band of
+//! +-[`params::SENSOR_STUCK_BAND_LSB`] for 5 ms after the command moved 0.1 V; a quiet window
+//! restarts every 10 ms, so the slow command changes that compensate drift at a regulated
+//! set-point never count; in closed loop it counts only while the error exceeds
+//! [`params::SENSOR_STUCK_ERROR_V`], so disturbance rejection never counts), saturated (in closed loop, the command held at a window edge for
+//! [`params::SATURATION_FAULT_S`] while the error, beyond [`params::SATURATION_ERROR_V`],
+//! pushes further out), a non-finite reference or an internal NaN. Raised by the firmware
+//! with [`ControllerState::raise`]: interrupt overrun, watchdog.
 //!
 //! # Guarantees
 //! Whatever the mode, the reference or the faults, every command leaves through
@@ -48,6 +55,7 @@ use crate::params;
 use crate::plant::LinearPlantConfig;
 use crate::prefilter::{PreFilter, PreFilterConfig, PreFilterState};
 use crate::reference::{ReferenceConfig, ReferenceGenerator, ReferenceState};
+use core::ops::Bound;
 
 /// Latched fault conditions, as a small bit set.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -66,6 +74,9 @@ impl Faults {
     pub const OVERRUN: Self = Self(8);
     /// A watchdog condition (raised by the firmware).
     pub const WATCHDOG: Self = Self(16);
+    /// In closed loop, the command sat at a window edge while the error pushed further out for
+    /// [`params::SATURATION_FAULT_S`]: the loop lost control.
+    pub const SATURATED: Self = Self(32);
 
     /// True if any bit of `other` is set.
     #[inline]
@@ -131,6 +142,9 @@ pub struct ControllerConfig {
     pub hysteresis_ff: bool,
     /// The command at rest and after a fault, volts at the amplifier input.
     pub safe_v: f64,
+    /// Rate of the ramp to `safe_v` (faults, `Safe` mode), V/s at the amplifier input: in
+    /// (0, the slew limit].
+    pub safe_ramp_v_per_s: f64,
 }
 
 impl Default for ControllerConfig {
@@ -144,6 +158,7 @@ impl Default for ControllerConfig {
             hysteresis: HysteresisTable::thesis_default(),
             hysteresis_ff: false,
             safe_v: params::SAFE_OUTPUT_V,
+            safe_ramp_v_per_s: params::SAFE_RAMP_INPUT_V_PER_S,
         }
     }
 }
@@ -165,6 +180,10 @@ pub struct Controller {
     /// Mean slope of the table, sensor volts per amplifier volt (the linear part).
     hysteresis_slope: f32,
     safe_v: f32,
+    /// Largest move per sample of the safe ramp, volts.
+    safe_ramp_v_per_step: f32,
+    /// Samples at a window edge (with the error pushing out) before [`Faults::SATURATED`].
+    saturation_samples: u32,
 }
 
 /// What one sample produced.
@@ -199,6 +218,15 @@ impl Controller {
             ));
         }
         let period_s = c.lag.period_s;
+        check_finite("safe_ramp_v_per_s", c.safe_ramp_v_per_s)?;
+        let slew_v_per_s = f64::from(lag.limits.slew_v_per_step) / period_s;
+        if !(c.safe_ramp_v_per_s > 0.0 && c.safe_ramp_v_per_s <= slew_v_per_s * (1.0 + 1e-6)) {
+            return Err(ConfigError::out_of_range(
+                "safe_ramp_v_per_s",
+                Bound::Excluded(0.0),
+                Bound::Included(slew_v_per_s),
+            ));
+        }
         let plant = LinearPlantConfig {
             period_s,
             ..c.plant
@@ -225,7 +253,31 @@ impl Controller {
             hysteresis_ff: c.hysteresis_ff,
             hysteresis_slope: slope,
             safe_v: c.safe_v as f32,
+            safe_ramp_v_per_step: (c.safe_ramp_v_per_s * period_s) as f32,
+            // Rounded: 0.02 s / 20 us is 999.99... in f64.
+            saturation_samples: (params::SATURATION_FAULT_S / period_s + 0.5) as u32,
         })
+    }
+
+    /// Largest move per sample of the ramp to the safe value, volts.
+    pub fn safe_ramp_v_per_step(&self) -> f32 {
+        self.safe_ramp_v_per_step
+    }
+
+    /// The next command of the ramp from `last` to the safe value: at most
+    /// `safe_ramp_v_per_step` per sample (then the limits: window, slew, finite).
+    #[inline]
+    fn ramp_to_safe(&self, last: f32) -> (f32, Flags) {
+        let d = self.safe_v - last;
+        let step = self.safe_ramp_v_per_step;
+        let target = if d > step {
+            last + step
+        } else if d < -step {
+            last - step
+        } else {
+            self.safe_v
+        };
+        self.lag.limits.apply(last, target)
     }
 
     /// The safe command, volts.
@@ -300,6 +352,11 @@ impl Controller {
         self.check_sensor(st, adc, measured_v);
         if st.entering {
             st.entering = false;
+            // A mode change re-anchors the stuck detector's window at the command in force.
+            st.frozen_samples = 0;
+            st.moved_samples = 0;
+            st.command_at_freeze = st.lag.output_v();
+            st.last_error_v = 0.0;
             if st.mode == Mode::ClosedLoop {
                 self.enter_closed_loop(st);
             }
@@ -315,14 +372,17 @@ impl Controller {
         }
         let last = st.lag.output_v();
         let (command_v, mut flags) = if !st.faults.is_empty() || st.mode == Mode::Safe {
-            self.lag.limits.apply(last, self.safe_v)
+            self.ramp_to_safe(last)
         } else {
             match st.mode {
                 Mode::ClosedLoop => {
                     let r_loop = self.prefilter.step(&mut st.prefilter, r_ahead);
                     let ff = self.feedforward(st, r_loop);
-                    self.lag
-                        .update_ff(&mut st.lag, r_loop + correction_v - measured_v, ff)
+                    let error_v = r_loop + correction_v - measured_v;
+                    st.last_error_v = error_v;
+                    let out = self.lag.update_ff(&mut st.lag, error_v, ff);
+                    self.check_saturation(st, out.0, error_v);
+                    out
                 }
                 Mode::OpenLoop => self.lag.limits.apply(last, r_now),
                 Mode::Hold | Mode::Safe => (last, Flags::HELD),
@@ -351,6 +411,24 @@ impl Controller {
         }
     }
 
+    /// Counts samples with the command at a window edge and the error pushing further out;
+    /// latches [`Faults::SATURATED`] after `saturation_samples` in a row.
+    #[inline]
+    fn check_saturation(&self, st: &mut ControllerState, command_v: f32, error_v: f32) {
+        let l = &self.lag.limits;
+        let e = params::SATURATION_ERROR_V as f32;
+        let pushing =
+            (command_v >= l.max_v && error_v > e) || (command_v <= l.min_v && error_v < -e);
+        if pushing {
+            st.edge_samples = st.edge_samples.saturating_add(1);
+            if st.edge_samples >= self.saturation_samples {
+                st.faults = st.faults | Faults::SATURATED;
+            }
+        } else {
+            st.edge_samples = 0;
+        }
+    }
+
     fn check_sensor(&self, st: &mut ControllerState, adc: AdcCode, measured_v: f32) {
         if !(params::SENSOR_VALID_MIN_V as f32..=params::SENSOR_VALID_MAX_V as f32)
             .contains(&measured_v)
@@ -359,15 +437,32 @@ impl Controller {
             st.faults = st.faults | Faults::SENSOR_RANGE;
         }
         let command = st.lag.output_v();
-        if adc == st.last_adc {
+        let in_band =
+            (i32::from(adc.0) - i32::from(st.last_adc.0)).abs() <= params::SENSOR_STUCK_BAND_LSB;
+        // In closed loop, a command that moves with the sensor still is disturbance rejection
+        // unless the error persists (the loop asks the sensor to move and it does not).
+        let asks_to_move = st.mode != Mode::ClosedLoop
+            || st.last_error_v.abs() > params::SENSOR_STUCK_ERROR_V as f32;
+        let moved = (command - st.command_at_freeze).abs() > params::SENSOR_STUCK_COMMAND_V as f32;
+        if in_band
+            && asks_to_move
+            && (moved || st.frozen_samples < 2 * params::SENSOR_STUCK_SAMPLES)
+        {
             st.frozen_samples = st.frozen_samples.saturating_add(1);
-            if st.frozen_samples >= params::SENSOR_STUCK_SAMPLES
-                && (command - st.command_at_freeze).abs() > params::SENSOR_STUCK_COMMAND_V as f32
-            {
-                st.faults = st.faults | Faults::SENSOR_STUCK;
+            // Counted from the command's move on: the sensor had SENSOR_STUCK_SAMPLES to
+            // follow (the loop's own delay is a few samples), so a step after a long quiet
+            // stretch is not mistaken for a stuck sensor.
+            if moved {
+                st.moved_samples = st.moved_samples.saturating_add(1);
+                if st.moved_samples >= params::SENSOR_STUCK_SAMPLES {
+                    st.faults = st.faults | Faults::SENSOR_STUCK;
+                }
             }
         } else {
+            // Out of the band (the sensor follows), or a quiet window is full: a new window
+            // from here.
             st.frozen_samples = 0;
+            st.moved_samples = 0;
             st.command_at_freeze = command;
             st.last_adc = adc;
         }
@@ -388,7 +483,10 @@ pub struct ControllerState {
     last_reference_v: f32,
     last_adc: AdcCode,
     frozen_samples: u32,
+    moved_samples: u32,
     command_at_freeze: f32,
+    edge_samples: u32,
+    last_error_v: f32,
 }
 
 impl ControllerState {
@@ -407,7 +505,10 @@ impl ControllerState {
             last_reference_v: 0.0,
             last_adc: AdcCode::MIN,
             frozen_samples: 0,
+            moved_samples: 0,
             command_at_freeze: safe,
+            edge_samples: 0,
+            last_error_v: 0.0,
         }
     }
 
@@ -446,6 +547,8 @@ impl ControllerState {
         self.faults = Faults::NONE;
         self.mode = Mode::Safe;
         self.frozen_samples = 0;
+        self.moved_samples = 0;
+        self.edge_samples = 0;
         self.command_at_freeze = self.lag.output_v();
         if !self.reference_v.is_finite() {
             self.reference_v = self.last_reference_v;
@@ -494,11 +597,30 @@ mod tests {
         assert_eq!(st.command_v(), 9.0);
         let s = c.step(&mut st, AdcCode::MAX);
         assert!(s.faults.contains(Faults::SENSOR_RANGE));
-        assert_eq!(s.command_v, 6.0, "one slew step (3 V) towards 0");
-        for _ in 0..5 {
-            c.step(&mut st, AdcCode::from_volts(1.0));
+        let step = (params::SAFE_RAMP_INPUT_V_PER_S / params::SAMPLE_RATE_HZ) as f32;
+        assert_eq!(
+            s.command_v,
+            9.0 - step,
+            "one safe-ramp step (20 mV) towards 0"
+        );
+        // 9 V at 1 V/ms: 450 samples in all (9 ms), every move at most one ramp step.
+        let mut last = s.command_v;
+        let mut samples = 1;
+        while st.command_v() != 0.0 && samples < 1000 {
+            let s = c.step(&mut st, AdcCode::from_volts(1.0));
+            assert!(
+                (last - s.command_v).abs() <= step + 1e-5,
+                "{last} -> {}",
+                s.command_v
+            );
+            last = s.command_v;
+            samples += 1;
         }
-        assert_eq!(st.command_v(), 0.0);
+        println!(
+            "fault ramp 9 V -> 0 V: {samples} samples ({} ms)",
+            samples as f64 / 50.0
+        );
+        assert!((449..=452).contains(&samples), "{samples}");
         assert!(st.faults().contains(Faults::SENSOR_RANGE), "latched");
         st.clear_faults();
         assert_eq!(st.mode(), Mode::Safe);
@@ -543,5 +665,121 @@ mod tests {
         // (host-tests' tracking table, with 1 mV noise); allow twice that.
         println!("peak tracking error {worst} V");
         assert!(worst < 0.014, "{worst}");
+    }
+
+    #[test]
+    fn safe_ramp_rate_is_a_setting_and_is_checked() {
+        let fast = ControllerConfig {
+            safe_ramp_v_per_s: params::AMP_SLEW_INPUT_V_PER_S,
+            ..ControllerConfig::default()
+        };
+        let c = Controller::new(&fast).unwrap();
+        assert!((c.safe_ramp_v_per_step() - 3.0).abs() < 1e-6);
+        for bad in [0.0, -1.0, f64::NAN, 2.0 * params::AMP_SLEW_INPUT_V_PER_S] {
+            let cfg = ControllerConfig {
+                safe_ramp_v_per_s: bad,
+                ..ControllerConfig::default()
+            };
+            assert!(Controller::new(&cfg).is_err(), "{bad}");
+        }
+        // `mode safe` ramps at the same rate.
+        let c = Controller::new(&ControllerConfig::default()).unwrap();
+        let mut st = ControllerState::new(&c);
+        st.set_mode(Mode::OpenLoop);
+        st.set_reference(5.0);
+        for _ in 0..3 {
+            c.step(&mut st, AdcCode::from_volts(4.0));
+        }
+        st.set_mode(Mode::Safe);
+        let s = c.step(&mut st, AdcCode::from_volts(4.0));
+        assert!((s.command_v - (5.0 - c.safe_ramp_v_per_step())).abs() < 1e-6);
+    }
+
+    #[test]
+    fn command_held_at_the_window_edge_with_the_error_latches_saturated() {
+        let c = Controller::new(&ControllerConfig::default()).unwrap();
+        let mut st = ControllerState::new(&c);
+        // The sensor is unplugged but reads 2 V (in range, with noise wider than the stuck
+        // detector's band): closed loop on 5 V winds the command to the top of the window and
+        // keeps pushing.
+        st.set_mode(Mode::ClosedLoop);
+        st.set_reference(5.0);
+        let mut at_edge = None;
+        let mut latched = None;
+        for n in 0..5000u32 {
+            let noise = [0i16, 20, -20, 10][(n % 4) as usize];
+            let s = c.step(&mut st, AdcCode(AdcCode::from_volts(2.0).0 + noise));
+            if s.command_v >= 10.0 && at_edge.is_none() {
+                at_edge = Some(n);
+            }
+            if s.faults.contains(Faults::SATURATED) && latched.is_none() {
+                latched = Some(n);
+            }
+        }
+        let (at_edge, latched) = (at_edge.unwrap(), latched.unwrap());
+        let expect = (params::SATURATION_FAULT_S * params::SAMPLE_RATE_HZ) as u32;
+        println!("edge reached at sample {at_edge}, SATURATED at {latched} (limit {expect})");
+        // The first sample at the edge counts as the first of `expect`.
+        assert_eq!(latched - at_edge + 1, expect, "{at_edge} {latched}");
+        assert_eq!(st.command_v(), 0.0, "ramped to safe");
+    }
+
+    #[test]
+    fn stuck_sensor_with_three_lsb_of_noise_is_detected() {
+        let c = Controller::new(&ControllerConfig::default()).unwrap();
+        let mut st = ControllerState::new(&c);
+        st.set_mode(Mode::OpenLoop);
+        // The stage is frozen at 3 V of sensor (+-3 LSB of noise); the command ramps up.
+        let frozen = AdcCode::from_volts(3.0).0;
+        let mut latched = None;
+        for n in 0..2000u32 {
+            st.set_reference(1.0 + n as f32 * 1e-3);
+            let noise = [0i16, 3, -3, 2, -1, -2, 1][(n % 7) as usize];
+            let s = c.step(&mut st, AdcCode(frozen + noise));
+            if s.faults.contains(Faults::SENSOR_STUCK) {
+                latched = Some(n);
+                break;
+            }
+        }
+        let n = latched.expect("detected");
+        println!("stuck sensor (+-3 LSB) detected after {n} samples");
+        assert!(n < 2 * params::SENSOR_STUCK_SAMPLES, "{n}");
+    }
+
+    #[test]
+    fn a_regulated_set_point_with_a_slowly_moving_command_is_not_stuck() {
+        // Closed loop holds the sensor still while the command creeps (drift compensation:
+        // 2 V/s, i.e. 20 mV per 10 ms window): never a stuck fault.
+        let c = Controller::new(&ControllerConfig::default()).unwrap();
+        let mut st = ControllerState::new(&c);
+        st.set_mode(Mode::OpenLoop);
+        let y = AdcCode::from_volts(4.0).0;
+        // The sensor follows the command's first move to 5 V (0.79 V/V), then stays.
+        for v in [0.0, 1.58, 3.16, 3.95] {
+            st.set_reference(5.0);
+            c.step(&mut st, AdcCode::from_volts(v));
+        }
+        for n in 0..50_000u32 {
+            st.set_reference(5.0 + n as f32 * 4e-5);
+            let s = c.step(&mut st, AdcCode(y + [0i16, 2, -2][(n % 3) as usize]));
+            assert!(s.faults.is_empty(), "sample {n}: {:?}", s.faults);
+        }
+    }
+
+    #[test]
+    fn a_step_after_a_long_quiet_stretch_is_not_stuck() {
+        // A noise-free sensor that follows the command 4 samples late (the loop's delay),
+        // quiet for 1 s, then a 4 V step: the sensor follows, no fault.
+        let c = Controller::new(&ControllerConfig::default()).unwrap();
+        let mut st = ControllerState::new(&c);
+        st.set_mode(Mode::OpenLoop);
+        let mut history = [0.0f32; 4];
+        for n in 0..100_000u32 {
+            st.set_reference(if n < 50_000 { 1.0 } else { 5.0 });
+            let y = history[(n % 4) as usize];
+            let s = c.step(&mut st, AdcCode::from_volts(y));
+            history[(n % 4) as usize] = s.command_v;
+            assert!(s.faults.is_empty(), "sample {n}: {:?}", s.faults);
+        }
     }
 }

@@ -55,6 +55,11 @@ pub const SAFE_WINDOW_MIN_V: f64 = 0.0;
 pub const SAFE_WINDOW_MAX_V: f64 = 10.0;
 /// The value the output rests at (boot, faults): the bottom of the window, stage retracted.
 pub const SAFE_OUTPUT_V: f64 = 0.0;
+/// Rate of the ramp to the safe value (after a fault, and on `mode safe`), V/s at the
+/// amplifier input: 1 V/ms, so the full 10 V window takes 10 ms, 150 times slower than the
+/// amplifier's own slew limit (issue 13 item 4: the full-slew ramp rang to -0.52 V). Our
+/// assumption; a setting (`ControllerConfig::safe_ramp_v_per_s`).
+pub const SAFE_RAMP_INPUT_V_PER_S: f64 = 1_000.0;
 
 // ----- Linear plant, eq. 4.4 / 4.6 (sec. 4.1.1). -----
 /// Static gain from amplifier control input to sensor monitor, V/V.
@@ -99,13 +104,35 @@ pub const RECOMPUTED_BANDWIDTH_HZ: f64 = 1001.0;
 pub const SENSOR_VALID_MIN_V: f64 = -0.5;
 /// Highest plausible sensor reading, volts (over-range above this).
 pub const SENSOR_VALID_MAX_V: f64 = 10.5;
-/// A sensor is stuck if its code does not change at all for this many samples (5 ms at
-/// 50 kHz) while the command moves by more than [`SENSOR_STUCK_COMMAND_V`]. A live E-509 shows
-/// +-2.5 mV of noise, about 8 ADC codes, so a frozen code with a moving command is a fault.
+/// A sensor is stuck if its code stays within +-[`SENSOR_STUCK_BAND_LSB`] of where it was for
+/// this many samples (5 ms at 50 kHz) after the command moved by more than
+/// [`SENSOR_STUCK_COMMAND_V`]. A live E-509 answers such a move with about 260 codes, so a
+/// code held inside the noise band while the command moves is a fault.
 pub const SENSOR_STUCK_SAMPLES: u32 = 250;
 /// Command movement that must show on the sensor, volts at the amplifier input (moves the
 /// stage by about 80 mV of monitor signal, 260 ADC codes).
 pub const SENSOR_STUCK_COMMAND_V: f64 = 0.1;
+/// The command held at a window edge while the loop error pushes further out for this long,
+/// seconds, is a fault ([`crate::controller::Faults::SATURATED`]): the loop has lost control
+/// (an unplugged or stuck sensor read in range, a reference the stage cannot reach). 20 ms is
+/// twenty closed-loop settling times of the thesis loop (1.14 ms) and short against the drift
+/// (our assumption).
+pub const SATURATION_FAULT_S: f64 = 0.02;
+/// Loop error (sensor volts) beyond which a command at the window edge counts towards
+/// [`SATURATION_FAULT_S`]: 200 times the sensor noise, so noise at a set-point near an edge
+/// never counts (our assumption).
+pub const SATURATION_ERROR_V: f64 = 0.5;
+/// Noise band of the stuck-sensor detector, ADC codes: a sensor whose code stays within
+/// +-this of the code at the start of the window is "not moving" (our assumption: a live
+/// E-509 moves 260 codes for [`SENSOR_STUCK_COMMAND_V`]; a frozen input with a few LSB of
+/// converter noise stays inside 8).
+pub const SENSOR_STUCK_BAND_LSB: i32 = 8;
+/// In closed loop the stuck-sensor window counts only while the loop error exceeds this,
+/// sensor volts: a regulated loop rejecting a disturbance moves the command with the sensor
+/// held still on purpose; a stuck sensor away from the reference leaves an error that the
+/// integrator keeps ramping on (our assumption: 20 times the E-509's 2.5 mV noise, 7 times
+/// the pre-filtered sine's tracking error).
+pub const SENSOR_STUCK_ERROR_V: f64 = 0.05;
 // ----- Hysteresis table (sec. 3.2, 5.3; issue #4). -----
 /// Nodes per axis of the Everett grid (turning-up value alpha, turning-down value beta).
 /// The table stores the strictly lower triangle alpha > beta: 45 * 44 / 2 = 990 `f32`, so the

@@ -403,7 +403,9 @@ impl Figures {
                     FAULT_AT
                 };
                 let allowed = if scenario == Scenario::SensorSticks {
-                    params::SENSOR_STUCK_SAMPLES
+                    // Counted from the command's 0.1 V move, which follows the reference's
+                    // through the pre-filter within a millisecond (50 samples).
+                    params::SENSOR_STUCK_SAMPLES + 50
                 } else {
                     1
                 };
@@ -412,9 +414,10 @@ impl Figures {
                 {
                     return Err("the fault latched too early or too late");
                 }
-                // From at most the top of the window, the ramp takes window / slew samples.
+                // From at most the top of the window, the ramp takes window / safe-ramp step
+                // samples (1 V/ms by default: 500 samples for 10 V at 50 kHz).
                 let l = controller.lag.limits;
-                let ramp = ((l.max_v - l.min_v) / l.slew_v_per_step) as u32 + 2;
+                let ramp = ((l.max_v - l.min_v) / controller.safe_ramp_v_per_step()) as u32 + 2;
                 if self.safe_reached_at == NEVER
                     || self.safe_reached_at > self.fault_latched_at.saturating_add(ramp)
                 {

@@ -7,13 +7,14 @@
 //! 4. ADC armed on the TIM2 trigger, interrupt priorities set (control highest), TIM2 started;
 //! 5. output-enable switch closed once the loop runs; tasks spawned; IWDG started.
 //!
-//! If the IWDG reset the chip, the WATCHDOG fault is raised at boot: the controller stays in
-//! safe until `clear`.
+//! If the IWDG, a panic or a HardFault reset the chip (`safe_state`), the WATCHDOG fault is
+//! raised at boot: the controller stays in safe until `clear`; `status` names the reason.
 
 mod adc;
 mod board;
 mod control;
 mod dac;
+mod safe_state;
 mod shared;
 mod tasks;
 mod timer;
@@ -34,11 +35,40 @@ use firmware::sample::LoopCore;
 use firmware::scaling::TimerSetting;
 use firmware::stats::CycleStats;
 use model_core::DacCode;
-use panic_probe as _;
 use static_cell::StaticCell;
 
 use firmware::settings::Settings;
 use model_core::controller::{ControllerState, Faults};
+
+unsafe extern "C" {
+    /// Start of the ITCM code (linker script `memory.x`).
+    static __sitcm: u32;
+    /// End of the ITCM code.
+    static __eitcm: u32;
+    /// Where the ITCM code is stored in flash.
+    static __siitcm: u32;
+}
+
+/// Copies the `.itcm` code (the control interrupt's handler) from flash to ITCM. Called once
+/// at boot, before the interrupt is enabled. Bounded by the section's size.
+fn load_itcm() {
+    let mut dst = (&raw const __sitcm).cast_mut();
+    let end = &raw const __eitcm;
+    let mut src = &raw const __siitcm;
+    while dst.cast_const() < end {
+        // SAFETY: `__sitcm..__eitcm` is the `.itcm` section in ITCM (enabled at reset on the
+        // H743, word-aligned by `memory.x`) and `__siitcm` its load image in flash of the same
+        // length; nothing runs from ITCM yet (the interrupt is not enabled), so nothing reads
+        // the words while they are written.
+        unsafe {
+            dst.write_volatile(src.read_volatile());
+            dst = dst.add(1);
+            src = src.add(1);
+        }
+    }
+    cortex_m::asm::dsb();
+    cortex_m::asm::isb();
+}
 
 bind_interrupts!(struct Irqs {
     USART3 => usart::BufferedInterruptHandler<peripherals::USART3>;
@@ -50,9 +80,34 @@ static UART_RX: StaticCell<[u8; 256]> = StaticCell::new();
 #[embassy_executor::main]
 async fn main(spawner: Spawner) {
     let p = embassy_stm32::init(board::config());
+    // The typed-in clocks (CPU_HZ: cycle counts in `status`; TIMER_CLOCK_HZ: the loop rate)
+    // must be the ones embassy set up (issue 13 item 9). If not, stay here: the DAC is not
+    // configured yet and the output switch's pull-down keeps the amplifier input at 0 V.
+    {
+        let clocks = embassy_stm32::rcc::clocks(&p.RCC);
+        let sys_hz = clocks.sys.to_hertz().map_or(0, |h| h.0);
+        let tim_hz = clocks.pclk1_tim.to_hertz().map_or(0, |h| h.0);
+        if sys_hz != board::CPU_HZ || tim_hz != board::TIMER_CLOCK_HZ {
+            defmt::error!(
+                "clock mismatch: sys {} Hz (expected {}), timers {} Hz (expected {}); loop not started",
+                sys_hz,
+                board::CPU_HZ,
+                tim_hz,
+                board::TIMER_CLOCK_HZ
+            );
+            loop {
+                cortex_m::asm::wfi();
+            }
+        }
+    }
     // Was the last reset the watchdog's? (RCC_RSR, cleared by RMVF.)
     let iwdg_reset = pac::RCC.rsr().read().iwdg1rstf();
     pac::RCC.rsr().modify(|w| w.set_rmvf(true));
+    // A panic or HardFault left its reason in reset-surviving RAM (`safe_state`).
+    let (last_reset, detail) = safe_state::take_last_reset(iwdg_reset);
+    if last_reset != firmware::reset_reason::ResetReason::PowerOn {
+        defmt::warn!("last reset: {} (detail {:x})", last_reset.name(), detail);
+    }
 
     let mut cp = cortex_m::Peripherals::take().expect("core peripherals are taken once, here");
     cp.SCB.enable_icache();
@@ -85,7 +140,8 @@ async fn main(spawner: Spawner) {
 
     // 3. The interrupt's context.
     let mut state = ControllerState::new(&config.controller);
-    if iwdg_reset {
+    if last_reset != firmware::reset_reason::ResetReason::PowerOn {
+        // Watchdog, panic or HardFault: stay safe until `clear`.
         state.raise(Faults::WATCHDOG);
     }
     let Some(producer) = shared::CAPTURE.producer() else {
@@ -94,7 +150,7 @@ async fn main(spawner: Spawner) {
     let Some(consumer) = shared::CAPTURE.consumer() else {
         defmt::panic!("the capture consumer is taken once")
     };
-    tasks::apply_rate_limits(setting.rate_hz);
+    firmware::app::apply_rate_limits(&shared::LINKS, setting.rate_hz, board::CPU_HZ);
     control::install(control::LoopContext {
         core: LoopCore {
             config,
@@ -103,9 +159,13 @@ async fn main(spawner: Spawner) {
             capture: producer,
         },
         dac,
+        next: safe,
     });
 
-    // 4. ADC on the timer's trigger; the control interrupt at the highest priority.
+    // 4. The handler's code into ITCM, then the ADC on the timer's trigger; the control
+    // interrupt at the highest priority.
+    load_itcm();
+    // ADC on the timer's trigger; the control interrupt at the highest priority.
     adc::init(p.ADC1, p.PA3);
     timer::init(p.TIM2, &setting);
     interrupt::ADC.set_priority(board::PRIO_CONTROL);
@@ -132,7 +192,7 @@ async fn main(spawner: Spawner) {
         Err(_) => defmt::panic!("USART3 configuration"),
     };
 
-    Timer::after_millis(10).await;
+    Timer::after_micros((design_parameters::BOOT_LOOP_TO_TASKS_S * 1e6) as u64).await;
     output_enable.set_high();
     core::mem::forget(output_enable); // stays high; the reset state (input, pulled down) opens it
 
@@ -140,7 +200,8 @@ async fn main(spawner: Spawner) {
     let led = Output::new(p.PB0, Level::Low, Speed::Low);
     let fault_led = Output::new(p.PB14, Level::Low, Speed::Low);
     defmt::info!("loop running at {} Hz", setting.rate_hz);
-    spawner.spawn(tasks::command_task(uart, settings, consumer).expect("spawn command task"));
+    let app = firmware::app::App::new(shared::LINKS, &shared::CAPTURE, consumer, settings);
+    spawner.spawn(tasks::command_task(uart, app).expect("spawn command task"));
     spawner.spawn(tasks::heartbeat_task(led, fault_led).expect("spawn heartbeat task"));
     spawner.spawn(tasks::supervisor_task(iwdg).expect("spawn supervisor task"));
 }

@@ -18,17 +18,20 @@ pub fn init(tim: Peri<'static, TIM2>, setting: &TimerSetting) {
     r.cr1().modify(|w| w.set_cen(false));
     r.cr2().modify(|w| w.set_mms(Mms::UPDATE));
     r.dier().write(|_| {});
-    set_rate(setting);
-}
-
-/// Loads a new period (takes effect at the next update: ARR is preloaded).
-pub fn set_rate(setting: &TimerSetting) {
-    let r = pac::TIM2;
     r.cr1().modify(|w| w.set_arpe(true));
     r.psc().write_value(setting.psc);
     r.arr().write_value(setting.arr);
-    // Load PSC and ARR now (UG also emits one TRGO: at most one extra conversion).
+    // Load PSC and ARR now, while the counter is stopped (before the ADC interrupt runs).
     r.egr().write(|w| w.set_ug(true));
+}
+
+/// Loads a new period while the loop runs. PSC and ARR are preloaded, so the new period starts
+/// at the next natural update: no forced update event, hence no extra TRGO and no spurious
+/// conversion (issue 13 item 9: UG here used to trigger a conversion mid-period, an overrun).
+pub fn set_rate(setting: &TimerSetting) {
+    let r = pac::TIM2;
+    r.psc().write_value(setting.psc);
+    r.arr().write_value(setting.arr);
 }
 
 /// Starts counting: conversions begin one period later.
