@@ -439,7 +439,6 @@ pub fn write(dir: &Path, base: &ModelFile, data: &[Data], d: &Diagnosis) -> anyh
         "<h2>Augmented model</h2><pre>{}</pre></body></html>",
         esc(&d.model.to_toml().unwrap_or_default())
     );
-    std::fs::write(dir.join("index.html"), h)
-        .with_context(|| format!("cannot write {}", dir.join("index.html").display()))?;
+    crate::io::checks::write_bytes(&dir.join("index.html"), h.as_bytes())?;
     Ok(())
 }

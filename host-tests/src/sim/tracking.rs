@@ -511,6 +511,10 @@ fn draw(tr: &[(f64, f64, f64, f64)], title: &str, path: &std::path::Path) -> any
 
 /// Draw the RMS error of each learning repeat (log scale, mV) to an SVG file.
 pub fn plot_learning(rms_v: &[f64], title: &str, path: &std::path::Path) -> anyhow::Result<()> {
+    crate::io::checks::write_atomic(path, |tmp| draw_learning(rms_v, title, tmp))
+}
+
+fn draw_learning(rms_v: &[f64], title: &str, path: &std::path::Path) -> anyhow::Result<()> {
     use plotters::prelude::*;
     if rms_v.is_empty() {
         bail!("no learning repeat to plot");
