@@ -830,3 +830,48 @@ fn single_sine_record_names_hysteresis_and_offset() {
         assert!(ratio <= 2.0, "seed {seed}: final {ratio:.2}x the floor");
     }
 }
+
+/// `piezo gap --json` on a clean record exits 0 with `"unexplained": null` (the verb's check
+/// that every figure is finite must not take the designed null for a NaN).
+#[test]
+fn gap_verb_on_a_clean_record_exits_0_with_unexplained_null() {
+    let dir = std::env::temp_dir().join(format!("piezo-gap-verb-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let rec = dir.join("clean.csv");
+    let piezo = env!("CARGO_BIN_EXE_piezo");
+    let synth = std::process::Command::new(piezo)
+        .args(["synth", "--model", "thesis-linear", "--protocol", "steps"])
+        .args([
+            "--seconds",
+            "5",
+            "--rate",
+            "5000",
+            "--noise-v",
+            "0.001",
+            "--output",
+        ])
+        .arg(&rec)
+        .output()
+        .unwrap();
+    assert!(
+        synth.status.success(),
+        "{}",
+        String::from_utf8_lossy(&synth.stderr)
+    );
+    let out = std::process::Command::new(piezo)
+        .args(["gap", "--model", "thesis-linear", "--json", "--data"])
+        .arg(&rec)
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    println!("{stdout}");
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let j: serde_json::Value = serde_json::from_str(stdout.trim()).unwrap();
+    assert!(j["unexplained"].is_null());
+    assert!(j["final_rms_v"].as_f64().is_some_and(f64::is_finite));
+    let _ = std::fs::remove_dir_all(&dir);
+}
