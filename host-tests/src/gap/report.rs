@@ -295,12 +295,7 @@ pub fn write(dir: &Path, base: &ModelFile, data: &[Data], d: &Diagnosis) -> anyh
             esc(&u.where_)
         );
         for (r, rec) in data.iter().enumerate() {
-            let res: Vec<(f64, f64)> = rec
-                .u_v
-                .iter()
-                .zip(rec.y_v.iter().zip(final_sims[r]))
-                .map(|(u, (y, m))| (*u, 1e3 * (y - m)))
-                .collect();
+            let res = residual_against_input(rec, final_sims[r]);
             h.push_str(&plot(
                 &format!("{}: final residual against input", rec.name),
                 "u (V)",
@@ -327,12 +322,7 @@ pub fn write(dir: &Path, base: &ModelFile, data: &[Data], d: &Diagnosis) -> anyh
                 rec.u_v.iter().copied().zip(res.iter().copied()).collect(),
                 4000,
             );
-            let after: Vec<(f64, f64)> = rec
-                .u_v
-                .iter()
-                .zip(rec.y_v.iter().zip(final_sims[r]))
-                .map(|(u, (y, m))| (*u, 1e3 * (y - m)))
-                .collect();
+            let after = residual_against_input(rec, final_sims[r]);
             h.push_str(&plot(
                 &format!(
                     "{}: residual against input ({} reversals; hysteresis loop, gain curve)",
@@ -441,4 +431,13 @@ pub fn write(dir: &Path, base: &ModelFile, data: &[Data], d: &Diagnosis) -> anyh
     );
     crate::io::checks::write_bytes(&dir.join("index.html"), h.as_bytes())?;
     Ok(())
+}
+
+/// `(u V, y - sim mV)` of a record: the residual against the input.
+fn residual_against_input(rec: &Data, sims: &[f64]) -> Vec<(f64, f64)> {
+    rec.u_v
+        .iter()
+        .zip(rec.y_v.iter().zip(sims))
+        .map(|(u, (y, m))| (*u, 1e3 * (y - m)))
+        .collect()
 }

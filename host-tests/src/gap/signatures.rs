@@ -206,7 +206,7 @@ fn welch(r: &[f64], t: f64) -> Vec<(f64, f64)> {
 /// Amplitude spectrum of `r` (sampling period `t` s) averaged over Hann segments of `seg`
 /// samples (or the whole record if shorter), half overlap, mean removed per segment, power
 /// averaged, square root taken: `4 |X| / n` per bin for one segment.
-fn averaged_spectrum(r: &[f64], t: f64, seg: usize) -> Vec<(f64, f64)> {
+pub(crate) fn averaged_spectrum(r: &[f64], t: f64, seg: usize) -> Vec<(f64, f64)> {
     let seg = seg.min(r.len());
     if seg < 64 {
         return vec![];

@@ -17,7 +17,7 @@
 //! mean over records of `max(MSE_r - floor_r^2, 0)`: the part a model could still explain.
 
 use super::data::{Data, min_max};
-use rustfft::{FftPlanner, num_complex::Complex};
+use super::signatures::averaged_spectrum;
 
 /// A record is left unexplained when its final residual RMS exceeds this many times its noise
 /// floor (the bar: "above 2x the floor").
@@ -123,7 +123,8 @@ fn describe(d: &Data, r: &[f64]) -> String {
     format!("{time}; {input}; {}", line(r, d.period_s()))
 }
 
-/// The strongest line of `r`'s spectrum and its share of the power, in words.
+/// The strongest line of `r`'s spectrum and its share of the power, in words: one Hann
+/// segment over the record (at most 2^16 samples), the line test's own spectrum routine.
 fn line(r: &[f64], t: f64) -> String {
     let n = r.len().min(1 << 16);
     if n < 64 {
@@ -131,25 +132,21 @@ fn line(r: &[f64], t: f64) -> String {
     }
     let x = &r[..n];
     let m = x.iter().sum::<f64>() / n as f64;
-    let mut buf: Vec<Complex<f64>> = x
+    // Power per bin, up to a common factor (the shares below are ratios).
+    let p: Vec<(f64, f64)> = averaged_spectrum(x, t, n)
+        .into_iter()
+        .map(|(f, a)| (f, a * a))
+        .collect();
+    let total: f64 = p.iter().map(|b| b.1).sum::<f64>().max(1e-300);
+    let k = (0..p.len()).fold(0, |a, k| if p[k].1 > p[a].1 { k } else { a });
+    let f = p[k].0;
+    let near: f64 = p
         .iter()
         .enumerate()
-        .map(|(i, v)| {
-            let w = 0.5 - 0.5 * (2.0 * std::f64::consts::PI * i as f64 / n as f64).cos();
-            Complex::new((v - m) * w, 0.0)
-        })
-        .collect();
-    FftPlanner::new().plan_fft_forward(n).process(&mut buf);
-    let p: Vec<f64> = buf[..n / 2].iter().map(|c| c.norm_sqr()).collect();
-    let total: f64 = p[1..].iter().sum::<f64>().max(1e-300);
-    let k = (1..p.len()).fold(1, |a, k| if p[k] > p[a] { k } else { a });
-    let df = 1.0 / (n as f64 * t);
-    let f = k as f64 * df;
-    let near: f64 = (1..p.len())
-        .filter(|&j| ((j as f64 * df) / f - 1.0).abs() <= 0.1 || j.abs_diff(k) <= 2)
-        .map(|j| p[j])
+        .filter(|&(j, b)| (b.0 / f - 1.0).abs() <= 0.1 || j.abs_diff(k) <= 2)
+        .map(|(_, b)| b.1)
         .sum();
-    let dc_share = 100.0 * m * m * n as f64 / r[..n].iter().map(|e| e * e).sum::<f64>().max(1e-300);
+    let dc_share = 100.0 * m * m * n as f64 / x.iter().map(|e| e * e).sum::<f64>().max(1e-300);
     format!(
         "strongest residual frequency {f:.3} Hz ({:.0} % of the varying power within 10 % of it); mean {:.2} mV ({dc_share:.0} % of the power)",
         100.0 * near / total,
