@@ -11,13 +11,16 @@
 use core::fmt::Write;
 use core::sync::atomic::Ordering;
 
-use model_core::controller::{Faults, Mode};
+use model_core::controller::{Controller, ControllerConfig, Faults, Mode};
 use model_core::frame::{self, FrameRef, Record};
+use model_core::learning::{Halt, Learning, LearningConfig, LearningState, Status as LearnStatus};
+use model_core::reference::ReferenceGenerator;
 use model_core::{AdcCode, DacCode};
 
 use crate::capture::{CaptureBuffer, CaptureState, Consumer};
-use crate::command::{self, CaptureRequest, Command, ModeRequest};
+use crate::command::{self, CaptureRequest, Command, LearnRequest, ModeRequest};
 use crate::design_parameters;
+use crate::learn::LearnTask;
 use crate::liveness;
 use crate::mailbox::Mailbox;
 use crate::reset_reason::ResetReason;
@@ -51,7 +54,7 @@ pub const FAULT_NAMES: [(Faults, &str); 6] = [
 ];
 
 /// Longest reply line, bytes.
-pub const MAX_REPLY: usize = 512;
+pub const MAX_REPLY: usize = 640;
 
 /// One reply line (without its line ending): a fixed buffer, no allocation; text beyond
 /// [`MAX_REPLY`] is cut.
@@ -137,7 +140,13 @@ fn write_faults(out: &mut Reply, bits: u8) {
     }
 }
 
-fn status(out: &mut Reply, settings: &Settings, links: &Links<'_>, board: &impl Board) {
+fn status(
+    out: &mut Reply,
+    settings: &Settings,
+    links: &Links<'_>,
+    learner: &Learner,
+    board: &impl Board,
+) {
     let st = links.stats.snapshot();
     let status = links.status;
     let mode = status.mode();
@@ -168,7 +177,190 @@ fn status(out: &mut Reply, settings: &Settings, links: &Links<'_>, board: &impl 
     );
     write_faults(out, status.faults.load(Ordering::Relaxed));
     let (reason, detail) = board.last_reset();
-    let _ = write!(out, " last_reset={} detail=0x{detail:x}", reason.name());
+    let _ = write!(out, " last_reset={} detail=0x{detail:x} ", reason.name());
+    learner.write_status(out);
+}
+
+/// The name of why learning froze or stopped.
+fn halt_name(h: Halt) -> &'static str {
+    match h {
+        Halt::Growing => "growing",
+        Halt::Fault(_) => "fault",
+        Halt::LoopOpened => "loop_opened",
+        Halt::ReferenceChanged => "reference_changed",
+        Halt::NonFinite => "nonfinite",
+        Halt::ShortBuffer => "short_buffer",
+        Halt::Requested => "requested",
+    }
+}
+
+/// The command task's half of iterative learning control (issue 14 item 3): the design, the
+/// state, the last repeat's error; the update itself runs in [`App::poll`]
+/// ([`LearnTask::service`]).
+struct Learner {
+    task: LearnTask,
+    /// Learning is on (`learn on` until `learn off`), whatever its status.
+    on: bool,
+    /// The design for the loop and generator in force, while on.
+    design: Option<Learning>,
+    state: LearningState,
+    /// The generator the interrupt runs (the last configuration posted).
+    generator: Option<ReferenceGenerator>,
+    /// RMS of `r - y` over the last repeat the interrupt handed over, volts.
+    rms_error_v: f32,
+}
+
+impl Learner {
+    /// `learn=<off|learning|frozen:WHY|stopped:WHY> learn_iter=N learn_rms_v=X`.
+    fn write_status(&self, out: &mut Reply) {
+        let _ = match (self.on, self.state.status()) {
+            (false, _) => write!(out, "learn=off"),
+            (true, LearnStatus::Learning) => write!(out, "learn=learning"),
+            (true, LearnStatus::Frozen(h)) => write!(out, "learn=frozen:{}", halt_name(h)),
+            (true, LearnStatus::Stopped(h)) => write!(out, "learn=stopped:{}", halt_name(h)),
+        };
+        let _ = write!(
+            out,
+            " learn_iter={} learn_rms_v={:.6}",
+            self.state.iteration(),
+            self.rms_error_v
+        );
+    }
+
+    /// Stops learning for `why`: no correction from the interrupt's next sample.
+    fn stop(&mut self, why: Halt) {
+        self.state.stop(why);
+        self.task.disable();
+    }
+
+    /// A configuration `cfg` (of `controller`) is about to be posted: a new generator stops
+    /// learning first (the table belongs to the old trajectory, and the interrupt must not
+    /// add it to the new one); another loop gets a new design.
+    fn before_post(&mut self, cfg: &LoopConfig, controller: &ControllerConfig) {
+        let new = cfg.controller.generator;
+        if self.on && self.generator != Some(new) {
+            self.stop(Halt::ReferenceChanged);
+            self.task.clear();
+        } else if self.on && self.design.is_some() {
+            match Learning::new(&LearningConfig::default(), controller) {
+                Ok(l) => self.design = Some(l),
+                Err(_) => self.stop(Halt::ReferenceChanged),
+            }
+        }
+        self.generator = Some(new);
+    }
+
+    /// Once per wake of the command task: stop on a fault or an opened loop, then serve a
+    /// repeat the interrupt handed over (the update).
+    fn poll(&mut self, links: &Links<'_>) {
+        let active = matches!(
+            self.state.status(),
+            LearnStatus::Learning | LearnStatus::Frozen(_)
+        );
+        if self.on && active {
+            let faults = links.status.faults.load(Ordering::Relaxed);
+            if faults != 0 {
+                self.stop(Halt::Fault(Faults(faults)));
+            } else if links.status.mode() != Some(Mode::ClosedLoop) {
+                self.stop(Halt::LoopOpened);
+            }
+        }
+        let Some(generator) = self.generator else {
+            return;
+        };
+        let learning = match (self.on, self.design.as_ref()) {
+            (true, Some(l)) => Some((l, &mut self.state)),
+            _ => None,
+        };
+        if let Some(s) = self.task.service(learning, &generator) {
+            self.rms_error_v = s.rms_error_v;
+        }
+        if matches!(self.state.status(), LearnStatus::Stopped(_)) && self.task.enabled() {
+            self.task.disable();
+        }
+    }
+
+    /// `learn on|off|freeze|reset`.
+    fn command(
+        &mut self,
+        req: LearnRequest,
+        settings: &Settings,
+        links: &Links<'_>,
+        out: &mut Reply,
+    ) {
+        match req {
+            LearnRequest::On => {
+                if links.status.mode() != Some(Mode::ClosedLoop)
+                    || links.status.faults.load(Ordering::Relaxed) != 0
+                {
+                    let _ = write!(out, "err learn needs closed loop without faults");
+                    return;
+                }
+                if matches!(settings.reference, command::ReferenceRequest::Step { .. }) {
+                    let _ = write!(
+                        out,
+                        "err learn needs a periodic reference (ref sine, ref triangle)"
+                    );
+                    return;
+                }
+                let cc = settings.controller_config();
+                let design = Learning::new(&LearningConfig::default(), &cc);
+                let generator = Controller::new(&cc).map(|c| c.generator);
+                match (design, generator) {
+                    (Ok(l), Ok(g)) if self.task.enable(l.period_samples()) => {
+                        self.design = Some(l);
+                        self.generator = Some(g);
+                        self.state = LearningState::new();
+                        self.on = true;
+                        self.rms_error_v = 0.0;
+                        let _ = write!(out, "ok learn on period_samples={}", l.period_samples());
+                    }
+                    (Err(e), _) | (_, Err(e)) => {
+                        let _ = write!(out, "err learn: {e}");
+                    }
+                    _ => {
+                        let _ = write!(out, "err learn: the repeat does not fit the table");
+                    }
+                }
+            }
+            LearnRequest::Off => {
+                self.task.disable();
+                self.on = false;
+                self.design = None;
+                let _ = write!(out, "ok learn off");
+            }
+            LearnRequest::Freeze => {
+                if self.on && self.state.status() == LearnStatus::Learning {
+                    self.state.freeze();
+                    let _ = write!(out, "ok learn frozen");
+                } else {
+                    let _ = write!(out, "err learn is not learning");
+                }
+            }
+            LearnRequest::Reset => {
+                // The zero table from the next repeat's start; iteration 0.
+                self.state.reset(&mut []);
+                self.task.clear();
+                self.rms_error_v = 0.0;
+                let resume = self.on
+                    && self.design.is_some()
+                    && links.status.mode() == Some(Mode::ClosedLoop)
+                    && links.status.faults.load(Ordering::Relaxed) == 0;
+                if resume {
+                    let n = self.design.map_or(0, |l| l.period_samples());
+                    if !self.task.enabled() {
+                        self.task.enable(n);
+                    }
+                    let _ = write!(out, "ok learn reset (learning)");
+                } else {
+                    self.task.disable();
+                    self.on = false;
+                    self.design = None;
+                    let _ = write!(out, "ok learn reset (off)");
+                }
+            }
+        }
+    }
 }
 
 /// Sampling instant to DAC update, microseconds: the measured ticks to the write (timer
@@ -184,10 +376,12 @@ fn commit(
     config: &Mailbox<LoopConfig>,
     settings: &mut Settings,
     candidate: Settings,
+    learner: &mut Learner,
     out: &mut Reply,
 ) -> bool {
     match candidate.transition_from(settings) {
         Ok(cfg) => {
+            learner.before_post(&cfg, &candidate.controller_config());
             if !config.post(cfg) {
                 let _ = write!(out, "err the configuration mailbox is busy");
                 return false;
@@ -241,6 +435,8 @@ pub struct App<const N: usize> {
     selftest_requested: bool,
     /// The self-test in progress.
     selftest: Option<SelfTest>,
+    /// Iterative learning control.
+    learner: Learner,
 }
 
 /// What the self-test measured at one level.
@@ -265,7 +461,7 @@ struct SelfTest {
 }
 
 /// Square root by Newton's iteration (no `std`); 0 for non-positive input.
-fn sqrt(x: f64) -> f64 {
+pub(crate) fn sqrt(x: f64) -> f64 {
     if x <= 0.0 || !x.is_finite() {
         return 0.0;
     }
@@ -346,9 +542,19 @@ impl<const N: usize> App<N> {
         links: Links<'static>,
         buffer: &'static CaptureBuffer<N>,
         consumer: Consumer<N>,
+        learn: LearnTask,
         settings: Settings,
     ) -> Self {
+        let generator = settings.loop_config().ok().map(|c| c.controller.generator);
         Self {
+            learner: Learner {
+                task: learn,
+                on: false,
+                design: None,
+                state: LearningState::new(),
+                generator,
+                rms_error_v: 0.0,
+            },
             links,
             buffer,
             consumer,
@@ -451,6 +657,10 @@ impl<const N: usize> App<N> {
         let cfg = candidate
             .transition_from(&self.settings)
             .map_err(|_| "the level's configuration was refused")?;
+        // The self-test runs from safe mode, so learning is stopped or off: this only keeps
+        // the generator in force known.
+        self.learner
+            .before_post(&cfg, &candidate.controller_config());
         if !self.links.config.post(cfg) {
             return Err("the configuration mailbox is busy");
         }
@@ -465,6 +675,7 @@ impl<const N: usize> App<N> {
     /// wake of the command task. Bounded: reads one level's capture (2000 records, in
     /// frames of 30) per call at most.
     pub fn poll(&mut self, board: &impl Board) -> Option<Reply> {
+        self.learner.poll(&self.links);
         let mut st = self.selftest?;
         let CaptureState::Done { len } = self.buffer.state() else {
             return None;
@@ -498,10 +709,12 @@ impl<const N: usize> App<N> {
         // Over: back to safe and the settings from before.
         self.selftest = None;
         self.links.requests.set_mode(Mode::Safe);
-        if let Ok(cfg) = st.restore.transition_from(&self.settings)
-            && self.links.config.post(cfg)
-        {
-            self.settings = st.restore;
+        if let Ok(cfg) = st.restore.transition_from(&self.settings) {
+            self.learner
+                .before_post(&cfg, &st.restore.controller_config());
+            if self.links.config.post(cfg) {
+                self.settings = st.restore;
+            }
         }
         let (gain, offset_v) = fit_gain_offset(&st.figures);
         let noise_v = st.figures.iter().map(|f| f.y_rms_v).fold(0.0, f64::max);
@@ -608,12 +821,13 @@ impl<const N: usize> App<N> {
         let settings = &mut self.settings;
         let capture = &mut self.consumer;
         let buffer = self.buffer;
+        let learner = &mut self.learner;
         match cmd {
             Command::Help => {
                 let _ = write!(out, "ok {}", command::HELP);
             }
             Command::Status => {
-                status(out, settings, &links, board);
+                status(out, settings, &links, &self.learner, board);
                 let _ = write!(out, " cmd_max_us={}", self.handle_max_us);
             }
             Command::Faults => {
@@ -644,18 +858,31 @@ impl<const N: usize> App<N> {
                         reference: r,
                         ..*settings
                     },
+                    learner,
                     out,
                 ) {
                     let _ = write!(out, "ok ref");
                 }
             }
             Command::Kc(kc) => {
-                if commit(links.config, settings, Settings { kc, ..*settings }, out) {
+                if commit(
+                    links.config,
+                    settings,
+                    Settings { kc, ..*settings },
+                    learner,
+                    out,
+                ) {
                     let _ = write!(out, "ok kc {kc}");
                 }
             }
             Command::Tau(tau_s) => {
-                if commit(links.config, settings, Settings { tau_s, ..*settings }, out) {
+                if commit(
+                    links.config,
+                    settings,
+                    Settings { tau_s, ..*settings },
+                    learner,
+                    out,
+                ) {
                     let _ = write!(out, "ok tau_s {tau_s:e}");
                 }
             }
@@ -667,6 +894,7 @@ impl<const N: usize> App<N> {
                         feedforward: on,
                         ..*settings
                     },
+                    learner,
                     out,
                 ) {
                     let _ = write!(out, "ok ff {}", if on { "on" } else { "off" });
@@ -693,6 +921,7 @@ impl<const N: usize> App<N> {
                                     rate_hz: t.rate_hz,
                                     ..*settings
                                 },
+                                learner,
                                 out,
                             ) {
                                 board.set_rate(&t);
@@ -713,6 +942,7 @@ impl<const N: usize> App<N> {
                                 adc_cal,
                                 ..*settings
                             },
+                            learner,
                             out,
                         ) {
                             let _ = write!(out, "ok cal gain {gain} offset_v {offset_v}");
@@ -756,6 +986,7 @@ impl<const N: usize> App<N> {
                     }
                 };
             }
+            Command::Learn(req) => learner.command(req, settings, &links, out),
             Command::SelfTest => {
                 if links.status.mode() != Some(Mode::Safe)
                     || links.status.faults.load(Ordering::Relaxed) != 0

@@ -24,6 +24,7 @@
 //! | `capture DURATION`                | record r, y, u, flags for DURATION (`s`, `ms`)      |
 //! | `capture status`                  | state of the capture                                |
 //! | `capture send [FIRST COUNT]`      | send the capture (or a part) as frames              |
+//! | `learn on\|off\|freeze\|reset`    | iterative learning of the periodic reference        |
 //! | `help`                            | list the commands                                   |
 //!
 //! Parsing takes a `&str` and allocates nothing; a line is at most [`MAX_LINE`] bytes.
@@ -92,6 +93,19 @@ pub enum CaptureRequest {
     },
 }
 
+/// What a `learn` line asks for (iterative learning control, issue 14 item 3).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum LearnRequest {
+    /// Start learning from a zero table (closed loop, periodic reference).
+    On,
+    /// Stop: no correction, no updates.
+    Off,
+    /// Keep the table in force, no more updates.
+    Freeze,
+    /// Clear the table and the iteration count; learning starts again if it was on.
+    Reset,
+}
+
 /// A parsed, range-checked command.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum Command {
@@ -126,6 +140,8 @@ pub enum Command {
     Capture(CaptureRequest),
     /// `selftest`: the loopback bring-up test (`app` module).
     SelfTest,
+    /// `learn on|off|freeze|reset`.
+    Learn(LearnRequest),
 }
 
 /// Why a line was refused; [`ParseError::message`] is the reply text.
@@ -172,7 +188,8 @@ impl ParseError {
 pub const HELP: &str = "commands: mode safe|open|closed|hold; ref step LEVEL; ref sine OFFSET AMPL FREQ; \
 ref triangle OFFSET AMPL FREQ (levels in um or v, FREQ in hz or khz); kc VALUE; tau VALUE(s|ms|us); \
 ff on|off; rate FREQ (safe mode only); cal GAIN OFFSET(v); status; faults; clear; capture DURATION(s|ms); capture status; \
-capture send [FIRST COUNT]; selftest (loopback cable, amplifier disconnected)";
+capture send [FIRST COUNT]; selftest (loopback cable, amplifier disconnected); learn on|off|freeze|reset \
+(closed loop, ref sine or triangle)";
 
 /// The units a number may carry.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -356,6 +373,14 @@ pub fn parse(line: &str) -> Result<Command, ParseError> {
             )?)),
             _ => Err(ParseError::WrongArgumentCount),
         },
+        "learn" => match args {
+            ["on"] => Ok(Command::Learn(LearnRequest::On)),
+            ["off"] => Ok(Command::Learn(LearnRequest::Off)),
+            ["freeze"] => Ok(Command::Learn(LearnRequest::Freeze)),
+            ["reset"] => Ok(Command::Learn(LearnRequest::Reset)),
+            [_] => Err(ParseError::BadKeyword),
+            _ => Err(ParseError::WrongArgumentCount),
+        },
         "ff" => match args {
             ["on"] => Ok(Command::Feedforward(true)),
             ["off"] => Ok(Command::Feedforward(false)),
@@ -469,6 +494,14 @@ mod tests {
             Ok(Command::Capture(CaptureRequest::Send { range: None }))
         );
         assert_eq!(parse("status"), Ok(Command::Status));
+        for (line, want) in [
+            ("learn on", LearnRequest::On),
+            ("learn off", LearnRequest::Off),
+            (" learn  freeze", LearnRequest::Freeze),
+            ("learn reset", LearnRequest::Reset),
+        ] {
+            assert_eq!(parse(line), Ok(Command::Learn(want)), "{line}");
+        }
         assert_eq!(
             parse("cal 1.0129 -0.0558v"),
             Ok(Command::Calibrate {
@@ -516,6 +549,10 @@ mod tests {
             ("tau 1s", OutOfRange),
             ("tau 0us", OutOfRange),
             ("ff maybe", BadKeyword),
+            ("learn", WrongArgumentCount),
+            ("learn start", BadKeyword),
+            ("learn on now", WrongArgumentCount),
+            ("learn 1", BadKeyword),
             ("rate 5khz", OutOfRange),
             ("rate 300khz", OutOfRange),
             ("rate 50000", BadUnit),

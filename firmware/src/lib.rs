@@ -10,6 +10,7 @@ pub mod app;
 pub mod capture;
 pub mod command;
 pub mod design_parameters;
+pub mod learn;
 pub mod liveness;
 pub mod mailbox;
 pub mod reset_reason;

@@ -7,9 +7,12 @@
 //! 1. take a new [`LoopConfig`] if the command task posted one (the mailbox);
 //! 2. apply the tasks' requests: mode, clear faults, raise faults ([`Requests`]);
 //! 3. raise WATCHDOG if the tasks stopped checking in ([`Liveness::isr_tick`]);
-//! 4. correct the ADC code, set the reference, run `Controller::step` (the one model-core
-//!    function: modes, fault latch and safe ramp, compensator, limits);
-//! 5. record the sample if a capture is running, publish the status ([`Status`]);
+//! 4. correct the ADC code, set the reference, read the learned correction at the
+//!    generator's index ([`Recorder::correction`]: one load) and run
+//!    `Controller::step_with_correction` (the one model-core function: modes, fault latch and
+//!    safe ramp, compensator, limits; the correction is 0 unless `learn on`);
+//! 5. record the sample's error for the learning ([`Recorder::record`]: one store) and, if a
+//!    capture is running, the sample; publish the status ([`Status`]);
 //! 6. after the DAC write: account the duration and raise OVERRUN if the sample was late.
 
 use core::sync::atomic::{AtomicBool, AtomicU8, AtomicU32, Ordering};
@@ -19,6 +22,7 @@ use model_core::controller::{ControllerState, Faults, Mode, Sample};
 use model_core::frame::Record;
 
 use crate::capture::Producer;
+use crate::learn::Recorder;
 use crate::liveness::Liveness;
 use crate::mailbox::Mailbox;
 use crate::settings::LoopConfig;
@@ -180,6 +184,8 @@ pub struct LoopCore<const N: usize> {
     pub stats: CycleStats,
     /// The right to record.
     pub capture: Producer<N>,
+    /// The learning's side in the interrupt (`learn on`).
+    pub learn: Recorder,
 }
 
 impl<const N: usize> LoopCore<N> {
@@ -215,7 +221,12 @@ impl<const N: usize> LoopCore<N> {
         }
         let y = self.config.adc_cal.apply(raw);
         self.state.set_reference(self.config.reference_v);
-        let s = self.config.controller.step(&mut self.state, y);
+        let controller = &self.config.controller;
+        let index = controller.reference_index(&self.state);
+        let correction_v = self.learn.correction(index);
+        let s = controller.step_with_correction(&mut self.state, y, correction_v);
+        self.learn
+            .record(index, &s, self.state.mode() == Mode::ClosedLoop);
         let r = AdcCode::from_volts(s.reference_v).0;
         self.capture.push(Record {
             r,
@@ -304,6 +315,9 @@ mod tests {
             state: ControllerState::new(&config.controller),
             stats: CycleStats::new(7200),
             capture: buf.producer().unwrap(),
+            learn: Box::leak(Box::new(crate::learn::LearnShared::new()))
+                .recorder()
+                .unwrap(),
         }
     }
 

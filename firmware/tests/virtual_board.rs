@@ -32,6 +32,7 @@ use firmware::design_parameters::{
     BOOT_LOOP_TO_TASKS_S, CAPTURE_RECORDS, IWDG_TIMEOUT_S, SUPERVISOR_PERIOD_S, TASK_CHECK_IN_S,
     UART_BAUD,
 };
+use firmware::learn::LearnShared;
 use firmware::liveness::{self, Liveness, TASK_COMMAND, TASK_HEARTBEAT, Verdict};
 use firmware::mailbox::Mailbox;
 use firmware::reset_reason::ResetReason;
@@ -110,6 +111,8 @@ struct VirtualBoard {
     links: Links<'static>,
     core: LoopCore<CAPTURE_RECORDS>,
     app: App<CAPTURE_RECORDS>,
+    /// The learning's shared buffers (`learn on`).
+    learn: &'static LearnShared,
     hw: VirtualBoardHw,
     stage: FullStage,
     sensor: Sensor,
@@ -155,6 +158,7 @@ impl VirtualBoard {
         };
         let capture: &'static CaptureBuffer<CAPTURE_RECORDS> =
             Box::leak(Box::new(CaptureBuffer::new()));
+        let learn: &'static LearnShared = Box::leak(Box::new(LearnShared::new()));
         let settings = Settings::default();
         let config = settings.loop_config().expect("the default configuration");
         firmware::app::apply_rate_limits(&links, settings.rate_hz, CPU_HZ);
@@ -163,11 +167,13 @@ impl VirtualBoard {
             state: ControllerState::new(&config.controller),
             stats: CycleStats::new(links.budget_cycles.load(Ordering::Relaxed)),
             capture: capture.producer().expect("one producer"),
+            learn: learn.recorder().expect("one recorder"),
         };
         let app = App::new(
             links,
             capture,
             capture.consumer().expect("one consumer"),
+            learn.task().expect("one learning task"),
             settings,
         );
         Self {
@@ -176,6 +182,7 @@ impl VirtualBoard {
             links,
             core,
             app,
+            learn,
             hw: VirtualBoardHw {
                 last_reset: (ResetReason::PowerOn, 0),
             },
@@ -725,4 +732,122 @@ fn selftest_passes_on_the_loopback_cable_and_fails_without_it() {
         let st = vb.command("status");
         assert!(st.contains("mode=safe"), "back to safe: {st}");
     }
+}
+
+/// The value of `key=` in a `status` line.
+fn field<'a>(status: &'a str, key: &str) -> &'a str {
+    let pat = format!(" {key}=");
+    let start = status
+        .find(&pat)
+        .unwrap_or_else(|| panic!("no {key} in {status}"))
+        + pat.len();
+    status[start..].split(' ').next().unwrap_or("")
+}
+
+/// Issue 14 item 3 on the virtual board: `learn on` over a 100 Hz sine (6 V p-p around 4 V,
+/// the design note's case of `model_core::learning`) on the thesis-full stage cuts the
+/// repeat's RMS error (`r - y` as the board measures it) by at least
+/// [`LEARN_MIN_IMPROVEMENT`] within [`LEARN_REPEATS`] repeats, without a fault and without
+/// tripping the growth flag; `learn reset` clears the table (the error comes back); a fault
+/// while learning stops it (no more updates, no correction).
+#[test]
+fn learning_a_100_hz_sine_cuts_the_error_reset_clears_and_a_fault_stops_it() {
+    /// Repeats of the 100 Hz sine (10 ms each) with learning on.
+    const LEARN_REPEATS: u32 = 80;
+    /// Least ratio of the first learning repeat's RMS error to the last one's (our
+    /// acceptance; the host harness reaches about 150 in 30 updates without the board's
+    /// extra sample of delay).
+    const LEARN_MIN_IMPROVEMENT: f32 = 10.0;
+    let period_s = 0.01;
+    let mut vb = VirtualBoard::boot();
+    vb.run_s(0.05);
+    assert_eq!(vb.command("ref sine 4v 3v 100hz"), "ok ref");
+    assert_eq!(vb.command("mode closed"), "ok mode closed");
+    vb.run_s(0.3);
+    let st = vb.command("status");
+    assert_eq!(field(&st, "learn"), "off", "{st}");
+    assert_eq!(vb.command("learn on"), "ok learn on period_samples=500");
+    let mut history = vec![];
+    for _ in 0..LEARN_REPEATS {
+        vb.run_s(period_s);
+        let st = vb.command("status");
+        let iter: u32 = field(&st, "learn_iter").parse().unwrap();
+        let rms: f32 = field(&st, "learn_rms_v").parse().unwrap();
+        assert_eq!(field(&st, "learn"), "learning", "{st}");
+        assert_eq!(field(&st, "faults"), "0x00", "{st}");
+        history.push((iter, rms));
+    }
+    let first = history
+        .iter()
+        .find(|h| h.1 > 0.0)
+        .expect("a repeat handed over")
+        .1;
+    let (iters, last) = *history.last().unwrap();
+    println!(
+        "learning, 100 Hz sine 6 V p-p on thesis-full: RMS error of the repeat {:.2} mV before the first update, {:.3} mV after {iters} updates ({LEARN_REPEATS} repeats): {:.0}x; dropped repeats {}; trajectory (iteration, mV): {:?}",
+        first * 1e3,
+        last * 1e3,
+        first / last,
+        vb.learn.dropped(),
+        history
+            .iter()
+            .step_by(8)
+            .map(|h| (h.0, (h.1 * 1e4).round() / 10.0))
+            .collect::<Vec<_>>()
+    );
+    assert!(first / last >= LEARN_MIN_IMPROVEMENT, "{first} -> {last}");
+    assert!(
+        iters >= LEARN_REPEATS / 3,
+        "an update every few repeats: {iters}"
+    );
+    assert!(vb.faults().is_empty());
+
+    // `learn reset`: iteration 0 and the zero table from the next repeat: the error returns.
+    assert_eq!(vb.command("learn reset"), "ok learn reset (learning)");
+    let st = vb.command("status");
+    assert_eq!(field(&st, "learn_iter"), "0", "{st}");
+    vb.run_s(3.0 * period_s);
+    let st = vb.command("status");
+    let rms_after_reset: f32 = field(&st, "learn_rms_v").parse().unwrap();
+    println!(
+        "after learn reset: RMS error {:.2} mV ({st})",
+        rms_after_reset * 1e3
+    );
+    assert!(
+        rms_after_reset > 0.5 * first,
+        "the cleared table leaves the unlearnt error: {rms_after_reset} vs {first}"
+    );
+    vb.run_s(10.0 * period_s);
+    let st = vb.command("status");
+    let iter_before_fault: u32 = field(&st, "learn_iter").parse().unwrap();
+    assert!(
+        iter_before_fault >= 1,
+        "learning again after the reset: {st}"
+    );
+
+    // A fault while learning: learning stops, no more updates, the output ramps to safe.
+    let t0 = vb.t_s();
+    vb.sensor = Sensor::OverRange;
+    vb.run_s(5.0 * period_s);
+    let st = vb.command("status");
+    println!("fault while learning: {st}");
+    assert_eq!(field(&st, "learn"), "stopped:fault", "{st}");
+    assert!(vb.faults().contains(Faults::SENSOR_RANGE));
+    assert!(!vb.learn.enabled(), "no correction after the stop");
+    let iter_at_stop: u32 = field(&st, "learn_iter").parse().unwrap();
+    assert!(
+        iter_at_stop <= iter_before_fault + 1,
+        "{iter_before_fault} {iter_at_stop}"
+    );
+    vb.run_s(5.0 * period_s);
+    let st = vb.command("status");
+    assert_eq!(field(&st, "learn_iter"), iter_at_stop.to_string(), "{st}");
+    let (t, _) = time_to_safe(&vb, t0);
+    println!("fault while learning: safe output after {:.2} ms", t * 1e3);
+    // From at most 7 V at 1 V/ms, plus the detection sample.
+    assert!(t < 0.008, "{t}");
+    assert_eq!(
+        vb.command("learn on"),
+        "err learn needs closed loop without faults"
+    );
 }

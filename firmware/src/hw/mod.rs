@@ -47,6 +47,29 @@ unsafe extern "C" {
     static __eitcm: u32;
     /// Where the ITCM code is stored in flash.
     static __siitcm: u32;
+    /// Start of the `.dtcm` section (NOLOAD; linker script `memory.x`).
+    static __sdtcm: u32;
+    /// End of the `.dtcm` section.
+    static __edtcm: u32;
+}
+
+/// Zeroes the `.dtcm` section (the learning's buffers, `shared::LEARN`), which the start-up
+/// code leaves as it found it: the zero bytes are the statics' declared values. Called once at
+/// boot, before anything reads them (the interrupt is not enabled yet). Bounded by the
+/// section's size.
+fn zero_dtcm() {
+    let mut dst = (&raw const __sdtcm).cast_mut();
+    let end = &raw const __edtcm;
+    while dst.cast_const() < end {
+        // SAFETY: `__sdtcm..__edtcm` is the `.dtcm` section in DTCM (enabled at reset on the
+        // H743, word-aligned by `memory.x`); nothing has read or taken a reference to the
+        // statics in it yet (this runs first in `main`, before the interrupt is enabled).
+        unsafe {
+            dst.write_volatile(0);
+            dst = dst.add(1);
+        }
+    }
+    cortex_m::asm::dsb();
 }
 
 /// Copies the `.itcm` code (the control interrupt's handler) from flash to ITCM. Called once
@@ -79,6 +102,7 @@ static UART_RX: StaticCell<[u8; 256]> = StaticCell::new();
 
 #[embassy_executor::main]
 async fn main(spawner: Spawner) {
+    zero_dtcm();
     let p = embassy_stm32::init(board::config());
     // The typed-in clocks (CPU_HZ: cycle counts in `status`; TIMER_CLOCK_HZ: the loop rate)
     // must be the ones embassy set up (issue 13 item 9). If not, stay here: the DAC is not
@@ -150,6 +174,10 @@ async fn main(spawner: Spawner) {
     let Some(consumer) = shared::CAPTURE.consumer() else {
         defmt::panic!("the capture consumer is taken once")
     };
+    let (Some(recorder), Some(learn_task)) = (shared::LEARN.recorder(), shared::LEARN.task())
+    else {
+        defmt::panic!("the learning tokens are taken once")
+    };
     firmware::app::apply_rate_limits(&shared::LINKS, setting.rate_hz, board::CPU_HZ);
     control::install(control::LoopContext {
         core: LoopCore {
@@ -157,6 +185,7 @@ async fn main(spawner: Spawner) {
             state,
             stats: CycleStats::new(shared::BUDGET_CYCLES.load(Ordering::Relaxed)),
             capture: producer,
+            learn: recorder,
         },
         dac,
         next: safe,
@@ -200,7 +229,13 @@ async fn main(spawner: Spawner) {
     let led = Output::new(p.PB0, Level::Low, Speed::Low);
     let fault_led = Output::new(p.PB14, Level::Low, Speed::Low);
     defmt::info!("loop running at {} Hz", setting.rate_hz);
-    let app = firmware::app::App::new(shared::LINKS, &shared::CAPTURE, consumer, settings);
+    let app = firmware::app::App::new(
+        shared::LINKS,
+        &shared::CAPTURE,
+        consumer,
+        learn_task,
+        settings,
+    );
     spawner.spawn(tasks::command_task(uart, app).expect("spawn command task"));
     spawner.spawn(tasks::heartbeat_task(led, fault_led).expect("spawn heartbeat task"));
     spawner.spawn(tasks::supervisor_task(iwdg).expect("spawn supervisor task"));

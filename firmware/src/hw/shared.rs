@@ -6,6 +6,7 @@ use core::sync::atomic::AtomicU32;
 
 use firmware::capture::CaptureBuffer;
 use firmware::design_parameters;
+use firmware::learn::LearnShared;
 use firmware::liveness::Liveness;
 use firmware::mailbox::Mailbox;
 use firmware::sample::{Links, Requests, Status};
@@ -24,6 +25,11 @@ pub static LIVENESS: Liveness = Liveness::new();
 pub static STATUS: Status = Status::new();
 /// The capture buffer (400 kB, in AXI SRAM: all of RAM is AXI SRAM in `memory.x`).
 pub static CAPTURE: CaptureBuffer<{ design_parameters::CAPTURE_RECORDS }> = CaptureBuffer::new();
+/// The learning control's tables and error records (80 KiB), in DTCM (`memory.x`: NOLOAD,
+/// zeroed by `super::zero_dtcm` before anything touches it; all-zero bytes are
+/// `LearnShared::new()`).
+#[unsafe(link_section = ".dtcm.learn")]
+pub static LEARN: LearnShared = LearnShared::new();
 /// Cycle budget of one sample (the period in CPU cycles minus the conversion time).
 pub static BUDGET_CYCLES: AtomicU32 = AtomicU32::new(u32::MAX);
 /// Samples without a task check-in before the interrupt raises the watchdog fault.
