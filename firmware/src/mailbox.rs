@@ -1,21 +1,24 @@
-//! Handing a new configuration to the control interrupt without tearing it and without a
-//! lock (issue 13 item 7).
+//! Handing a new configuration to the control interrupt without tearing it, without a lock
+//! and without a copy in the interrupt (issue 13 items 1 and 7).
 //!
 //! A triple buffer: three slots, each owned at any instant by exactly one of the writer (the
 //! command task), the reader (the interrupt) or the "back" position between them. The writer
 //! fills its own slot (no lock: the interrupt keeps running, even while a 4.2 KB controller
 //! is copied), then swaps it into the back position with one atomic operation, marked fresh.
-//! The interrupt, once per sample, loads the back word (one atomic load when nothing is
-//! pending); when it is fresh, swaps its own slot into the back and reads the fresh one.
-//! Neither side waits for the other, and neither masks interrupts: until issue 13 the post
-//! copied the value inside a critical section, which held the control interrupt off for the
-//! copy (about 3 us for a controller: an overrun at 200 kHz). A newer post before the
-//! interrupt took the previous one replaces it (the last word wins).
+//! The interrupt, once per sample ([`Reader::update`]), loads the back word (one atomic load
+//! when nothing is pending); when it is fresh, swaps its own slot into the back and takes the
+//! fresh one: two atomic swaps and an index store. **The value is then used where it lies**
+//! ([`Reader::get`]): the interrupt never copies it. Until issue 13 the post copied the value
+//! inside a critical section (the control interrupt held off for the copy); after item 7 the
+//! interrupt still copied it out of its slot (about 3 us for a controller, once per change:
+//! an overrun at 200 kHz, whose budget is 3 us). Neither side waits for the other, and
+//! neither masks interrupts. A newer post before the interrupt took the previous one replaces
+//! it (the last word wins).
 //!
 //! Exclusivity of the two roles is enforced, not assumed: a `post` while another `post` is
-//! in progress (a second writer) is refused (returns false), and so is a concurrent `take`,
-//! so the slot ownership above holds whatever the callers do. The interrupt still copies the
-//! value out of its slot (about 3 us for a controller, once per change).
+//! in progress (a second writer) is refused (returns false), and the reader is a token that
+//! exists once ([`Mailbox::reader`]); the value in force is borrowed from the token, so it
+//! cannot be held across the next [`Reader::update`].
 
 use core::cell::UnsafeCell;
 use core::mem::MaybeUninit;
@@ -31,15 +34,22 @@ pub struct Mailbox<T: Copy> {
     slots: [UnsafeCell<MaybeUninit<T>>; 3],
     back: AtomicU8,
     write_idx: AtomicU8,
-    read_idx: AtomicU8,
     writing: AtomicBool,
-    reading: AtomicBool,
+    reader_taken: AtomicBool,
+}
+
+/// The interrupt's side: the value in force, in the slot the reader owns.
+pub struct Reader<'a, T: Copy> {
+    mailbox: &'a Mailbox<T>,
+    /// The slot the reader owns (initialised: by [`Mailbox::reader`] or a post).
+    idx: u8,
 }
 
 // SAFETY: the slots are only accessed by the role (writer or reader) that owns their index
-// (see the module note); the roles are exclusive through `writing` / `reading`, and the
-// hand-over of a slot goes through the AcqRel swap of `back`, which orders the slot's write
-// before its read. `T: Send` because values cross from the writer's context to the reader's.
+// (see the module note); the writer role is exclusive through `writing`, the reader is a
+// token handed out once, and the hand-over of a slot goes through the AcqRel swap of `back`,
+// which orders the slot's write before its read. `T: Send` because values cross from the
+// writer's context to the reader's.
 unsafe impl<T: Copy + Send> Sync for Mailbox<T> {}
 
 impl<T: Copy> Default for Mailbox<T> {
@@ -59,10 +69,23 @@ impl<T: Copy> Mailbox<T> {
             ],
             back: AtomicU8::new(1),
             write_idx: AtomicU8::new(0),
-            read_idx: AtomicU8::new(2),
             writing: AtomicBool::new(false),
-            reading: AtomicBool::new(false),
+            reader_taken: AtomicBool::new(false),
         }
+    }
+
+    /// The reader's token with `initial` in force (at boot, before the interrupt runs);
+    /// `None` if it was already taken.
+    pub fn reader(&self, initial: T) -> Option<Reader<'_, T>> {
+        if self.reader_taken.swap(true, Ordering::AcqRel) {
+            return None;
+        }
+        let idx = 2;
+        let slot = self.slots.get(usize::from(idx))?;
+        // SAFETY: slot 2 is the reader's from `new` on (the writer starts with 0, the back
+        // with 1), and this is the only reader, created once, before it reads anything.
+        unsafe { (*slot.get()).write(initial) };
+        Some(Reader { mailbox: self, idx })
     }
 
     /// Posts `value` (task side). False if another `post` was in progress at that instant (a
@@ -89,32 +112,51 @@ impl<T: Copy> Mailbox<T> {
         self.back.load(Ordering::Acquire) & FRESH != 0
     }
 
-    /// Takes the posted value if there is one (interrupt side). Bounded: one load when nothing
-    /// is pending; otherwise two swaps and the copy.
+    /// True if `value` lies in one of this mailbox's slots (a value in force that was not
+    /// copied out of it).
+    pub fn holds(&self, value: &T) -> bool {
+        self.slots
+            .iter()
+            .any(|s| core::ptr::eq(s.get().cast::<T>().cast_const(), value))
+    }
+}
+
+impl<T: Copy> Reader<'_, T> {
+    /// Takes the posted value if there is one (interrupt side, once per sample); true when
+    /// it did. Bounded and copy-free: one atomic load when nothing is pending, otherwise two
+    /// atomic swaps (the back word) and an index store.
     #[inline]
-    pub fn take(&self) -> Option<T> {
-        if !self.pending() {
-            return None;
+    pub fn update(&mut self) -> bool {
+        let mb = self.mailbox;
+        if !mb.pending() {
+            return false;
         }
-        if self.reading.swap(true, Ordering::Acquire) {
-            return None;
+        let old = mb.back.swap(self.idx, Ordering::AcqRel);
+        if old & FRESH == 0 {
+            // Cannot happen with one reader (only it clears FRESH): take the slot back.
+            let mine = mb.back.swap(old, Ordering::AcqRel);
+            self.idx = mine & IDX;
+            return false;
         }
-        let r = self.read_idx.load(Ordering::Relaxed) & IDX;
-        let old = self.back.swap(r, Ordering::AcqRel);
-        let fresh = old & IDX;
-        self.read_idx.store(fresh, Ordering::Relaxed);
-        let value = if old & FRESH != 0 {
-            self.slots.get(usize::from(fresh)).map(|slot| {
-                // SAFETY: the slot came through `back` marked FRESH, so a `post` wrote it
-                // completely before its AcqRel swap, which this AcqRel swap synchronises
-                // with; it is now the reader's and `reading` makes this the only reader.
-                unsafe { (*slot.get()).assume_init_read() }
-            })
-        } else {
-            None
-        };
-        self.reading.store(false, Ordering::Release);
-        value
+        self.idx = old & IDX;
+        true
+    }
+
+    /// The value in force, in place.
+    #[inline]
+    pub fn get(&self) -> &T {
+        let slot = self
+            .mailbox
+            .slots
+            .get(usize::from(self.idx & IDX))
+            .unwrap_or(&self.mailbox.slots[2]);
+        // SAFETY: the reader's slot was initialised by `Mailbox::reader` or by the `post`
+        // that handed it over FRESH (its AcqRel swap synchronises with `update`'s), and the
+        // writer does not touch it until the reader swaps it back in `update`, which needs
+        // `&mut self` and so ends this borrow first. (`idx & IDX` is at most 3; the slots
+        // hold 3, so index 3 falls back to the reader's initial slot, which `update` never
+        // produces.)
+        unsafe { (*slot.get()).assume_init_ref() }
     }
 }
 
@@ -123,13 +165,18 @@ mod tests {
     use super::*;
 
     #[test]
-    fn last_post_wins_and_is_taken_once() {
+    fn last_post_wins_and_is_taken_once_in_place() {
         let m: Mailbox<[u32; 4]> = Mailbox::new();
-        assert_eq!(m.take(), None);
+        let mut r = m.reader([0; 4]).unwrap();
+        assert!(!r.update());
+        assert_eq!(*r.get(), [0; 4]);
         assert!(m.post([1; 4]));
         assert!(m.post([2; 4]));
-        assert_eq!(m.take(), Some([2; 4]));
-        assert_eq!(m.take(), None);
+        assert!(r.update());
+        assert_eq!(*r.get(), [2; 4]);
+        assert!(m.holds(r.get()), "used where it lies, not copied");
+        assert!(!r.update());
+        assert_eq!(*r.get(), [2; 4], "stays in force");
     }
 
     #[test]
@@ -139,10 +186,10 @@ mod tests {
         assert!(!m.post(1), "a concurrent second post is refused");
         m.writing.store(false, Ordering::Relaxed);
         assert!(m.post(2));
-        m.reading.store(true, Ordering::Relaxed); // a take in progress elsewhere
-        assert_eq!(m.take(), None);
-        m.reading.store(false, Ordering::Relaxed);
-        assert_eq!(m.take(), Some(2));
+        let mut r = m.reader(0).unwrap();
+        assert!(m.reader(0).is_none(), "one reader");
+        assert!(r.update());
+        assert_eq!(*r.get(), 2);
         assert!(!m.pending());
     }
 
@@ -150,6 +197,7 @@ mod tests {
     fn never_torn_under_concurrency() {
         // Each posted value is 32 copies of one number: a torn read would mix two numbers.
         static M: Mailbox<[u64; 32]> = Mailbox::new();
+        let mut r = M.reader([0; 32]).unwrap();
         let writer = std::thread::spawn(|| {
             for i in 1..=20_000u64 {
                 assert!(M.post([i; 32]));
@@ -162,12 +210,16 @@ mod tests {
         let mut seen = 0u32;
         let mut last = 0;
         while !writer.is_finished() || M.pending() {
-            if let Some(v) = M.take() {
+            if r.update() {
+                let v = r.get();
                 assert!(v.iter().all(|x| *x == v[0]), "torn value");
                 assert!(v[0] > last, "values arrive in order");
                 last = v[0];
                 seen += 1;
             }
+            // Read the value in force while the writer fills another slot.
+            let v = r.get();
+            assert!(v.iter().all(|x| *x == v[0]), "torn value in force");
         }
         writer.join().unwrap();
         println!("took {seen} of 20000 posts, none torn, last {last}");

@@ -10,6 +10,44 @@
 //! RCC flags: the IWDG's, or power-on / pin.
 //!
 //! The record is four `u32`s so the handler can store it with plain volatile word writes.
+//!
+//! The handlers' sequence itself is here too, register-free: [`enter_safe_state`] over a
+//! [`SafeStateOutputs`] (registers on the board; the virtual board's switch, DAC and
+//! `.uninit` RAM on the host, `tests/virtual_board.rs`), and the boot's read-and-clear
+//! [`take_last_reset`]. The board's handler adds only the reset itself.
+
+use model_core::{DacCode, params};
+
+/// What the safe-state sequence drives: the board's registers, or a model of them.
+pub trait SafeStateOutputs {
+    /// Masks every interrupt: nothing else runs from here on.
+    fn mask_interrupts(&mut self);
+    /// Opens the output-enable switch (PD15 low): the amplifier input goes to 0 V through
+    /// its pull-down, whatever the DAC holds.
+    fn open_output_switch(&mut self);
+    /// Sends `code` to the DAC, waiting a bounded time for the frame to finish.
+    fn send_dac(&mut self, code: DacCode);
+    /// Stores `record` in the RAM that survives the reset (`.uninit`).
+    fn keep_record(&mut self, record: ResetRecord);
+}
+
+/// The safe-state sequence of the panic and HardFault handlers, in this order: interrupts
+/// masked, output switch open, the safe code (`params::SAFE_OUTPUT_V`) to the DAC, the
+/// reason kept. The caller then resets the chip.
+pub fn enter_safe_state(out: &mut impl SafeStateOutputs, reason: ResetReason, detail: u32) {
+    out.mask_interrupts();
+    out.open_output_switch();
+    out.send_dac(DacCode::from_volts(params::SAFE_OUTPUT_V as f32));
+    out.keep_record(ResetRecord::encode(reason, detail));
+}
+
+/// At boot: what the last reset was (the record if valid, else the IWDG flag, else power-on),
+/// and the record cleared, so the next power-on does not read it again.
+pub fn take_last_reset(record: &mut ResetRecord, iwdg_flag: bool) -> (ResetReason, u32) {
+    let last = record.last_reset(iwdg_flag);
+    *record = ResetRecord::default();
+    last
+}
 
 /// Marks a record written by this firmware ("PZRR").
 pub const MAGIC: u32 = 0x505A_5252;
@@ -144,6 +182,10 @@ mod tests {
             check: 0,
         };
         assert_eq!(garbage.decode(), None);
+        // Taken once: the next boot without a new record is a power-on.
+        let mut kept = ResetRecord::encode(ResetReason::Panic, 42);
+        assert_eq!(take_last_reset(&mut kept, false), (ResetReason::Panic, 42));
+        assert_eq!(take_last_reset(&mut kept, false), (ResetReason::PowerOn, 0));
         println!(
             "panic record: {:x?} -> {}",
             ResetRecord::encode(ResetReason::Panic, 42),

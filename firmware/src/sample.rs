@@ -4,7 +4,8 @@
 //! returned code to the DAC, measures its own duration and calls [`LoopCore::finish`]. In
 //! between, everything is here:
 //!
-//! 1. take a new [`LoopConfig`] if the command task posted one (the mailbox);
+//! 1. take a new [`LoopConfig`] if the command task posted one (the mailbox's
+//!    [`Reader::update`]: an index swap, the configuration is used where it lies);
 //! 2. apply the tasks' requests: mode, clear faults, raise faults ([`Requests`]);
 //! 3. raise WATCHDOG if the tasks stopped checking in ([`Liveness::isr_tick`]);
 //! 4. correct the ADC code, set the reference, read the learned correction at the
@@ -24,7 +25,7 @@ use model_core::frame::Record;
 use crate::capture::Producer;
 use crate::learn::Recorder;
 use crate::liveness::Liveness;
-use crate::mailbox::Mailbox;
+use crate::mailbox::{Mailbox, Reader};
 use crate::settings::LoopConfig;
 use crate::stats::{CycleStats, SharedStats};
 
@@ -176,8 +177,8 @@ pub struct Links<'a> {
 
 /// Everything the interrupt owns, apart from the DAC.
 pub struct LoopCore<const N: usize> {
-    /// The active configuration.
-    pub config: LoopConfig,
+    /// The active configuration, in its mailbox slot ([`Reader::get`]).
+    pub config: Reader<'static, LoopConfig>,
     /// The controller's state.
     pub state: ControllerState,
     /// Timing accumulator.
@@ -193,14 +194,14 @@ impl<const N: usize> LoopCore<N> {
     /// `dac` code goes out.
     #[inline]
     pub fn step(&mut self, links: &Links<'_>, raw: u32) -> Sample {
-        if let Some(c) = links.config.take() {
-            self.config = c;
-            if c.restart && self.state.mode() == Mode::ClosedLoop {
-                // Re-enter closed loop at the next step: generator from its start, pre-filter
-                // settled, compensator bumpless (model-core's entering logic).
-                self.state.set_mode(Mode::Hold);
-                self.state.set_mode(Mode::ClosedLoop);
-            }
+        if self.config.update()
+            && self.config.get().restart
+            && self.state.mode() == Mode::ClosedLoop
+        {
+            // Re-enter closed loop at the next step: generator from its start, pre-filter
+            // settled, compensator bumpless (model-core's entering logic).
+            self.state.set_mode(Mode::Hold);
+            self.state.set_mode(Mode::ClosedLoop);
         }
         let req = links.requests;
         if let Some(mode) = mode_from_u8(req.mode.swap(NO_MODE, Ordering::Relaxed)) {
@@ -219,9 +220,10 @@ impl<const N: usize> LoopCore<N> {
         {
             self.state.raise(Faults::WATCHDOG);
         }
-        let y = self.config.adc_cal.apply(raw);
-        self.state.set_reference(self.config.reference_v);
-        let controller = &self.config.controller;
+        let cfg = self.config.get();
+        let y = cfg.adc_cal.apply(raw);
+        self.state.set_reference(cfg.reference_v);
+        let controller = &cfg.controller;
         let index = controller.reference_index(&self.state);
         let correction_v = self.learn.correction(index);
         let s = controller.step_with_correction(&mut self.state, y, correction_v);
@@ -274,7 +276,7 @@ mod tests {
     }
 
     struct World {
-        mailbox: Mailbox<LoopConfig>,
+        mailbox: &'static Mailbox<LoopConfig>,
         requests: Requests,
         liveness: Liveness,
         stats: SharedStats,
@@ -286,7 +288,7 @@ mod tests {
     impl World {
         fn new(stall: u32) -> Self {
             Self {
-                mailbox: Mailbox::new(),
+                mailbox: Box::leak(Box::new(Mailbox::new())),
                 requests: Requests::new(),
                 liveness: Liveness::new(),
                 stats: SharedStats::new(),
@@ -297,7 +299,7 @@ mod tests {
         }
         fn links(&self) -> Links<'_> {
             Links {
-                config: &self.mailbox,
+                config: self.mailbox,
                 requests: &self.requests,
                 liveness: &self.liveness,
                 stats: &self.stats,
@@ -308,10 +310,10 @@ mod tests {
         }
     }
 
-    fn core(buf: &'static CaptureBuffer<64>) -> LoopCore<64> {
+    fn core(buf: &'static CaptureBuffer<64>, w: &World) -> LoopCore<64> {
         let config = Settings::default().loop_config().unwrap();
         LoopCore {
-            config,
+            config: w.mailbox.reader(config).unwrap(),
             state: ControllerState::new(&config.controller),
             stats: CycleStats::new(7200),
             capture: buf.producer().unwrap(),
@@ -326,8 +328,8 @@ mod tests {
         static BUF: CaptureBuffer<64> = CaptureBuffer::new();
         let w = World::new(u32::MAX);
         let links = w.links();
-        let mut c = core(&BUF);
-        let raw = raw_of(2.0, &c.config);
+        let mut c = core(&BUF, &w);
+        let raw = raw_of(2.0, c.config.get());
         let s = c.step(&links, raw);
         assert_eq!(s.command_v, 0.0, "boots at the safe value");
         assert_eq!(w.status.mode(), Some(Mode::Safe));
@@ -364,7 +366,7 @@ mod tests {
         static BUF: CaptureBuffer<64> = CaptureBuffer::new();
         let w = World::new(100);
         let links = w.links();
-        let mut c = core(&BUF);
+        let mut c = core(&BUF, &w);
         let cfg = Settings {
             reference: ReferenceRequest::Step { level_v: 9.0 },
             ..Settings::default()
@@ -373,10 +375,10 @@ mod tests {
         .unwrap();
         assert!(w.mailbox.post(cfg));
         w.requests.set_mode(Mode::OpenLoop);
-        let raw = raw_of(5.0, &c.config);
+        let raw = raw_of(5.0, c.config.get());
         let mut last = 0.0;
         let mut first_fault = None;
-        let ramp = c.config.controller.safe_ramp_v_per_step();
+        let ramp = c.config.get().controller.safe_ramp_v_per_step();
         for n in 0..700 {
             // The tasks check in for the first 10 samples only.
             if n < 10 {
@@ -424,7 +426,7 @@ mod tests {
         static BUF: CaptureBuffer<64> = CaptureBuffer::new();
         let w = World::new(u32::MAX);
         let links = w.links();
-        let mut c = core(&BUF);
+        let mut c = core(&BUF, &w);
         let mut consumer = BUF.consumer().unwrap();
         consumer.arm(8).unwrap();
         let cfg = Settings {
@@ -435,7 +437,7 @@ mod tests {
         .unwrap();
         assert!(w.mailbox.post(cfg));
         w.requests.set_mode(Mode::OpenLoop);
-        let raw = raw_of(1.0, &c.config);
+        let raw = raw_of(1.0, c.config.get());
         let mut sent = vec![];
         for n in 0..8 {
             let s = c.step(&links, raw);

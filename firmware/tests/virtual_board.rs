@@ -1,26 +1,37 @@
-//! The virtual board (issue 13), first version: the firmware's register-free code on the
-//! host under simulated, deterministic time, with the real constants.
+//! The virtual board (issue 13): the firmware's register-free code on the host under
+//! simulated, deterministic time, with the real constants.
 //!
 //! What runs is the firmware's own code: the control interrupt's [`LoopCore::step`] /
-//! [`LoopCore::finish`] (`src/sample.rs`, calling `Controller::step`), the command task's
-//! [`App`] (`src/app.rs`: line assembly, the command handler, `status`, the capture upload
-//! as frames), the liveness rule (`src/liveness.rs`) with the supervisor's verdicts, the
-//! settings -> controller path, the ADC front end model of the README
+//! [`LoopCore::finish`] (`src/sample.rs`, calling `Controller::step_with_correction`, taking
+//! new configurations from the mailbox in place), the command task's [`App`] (`src/app.rs`:
+//! line assembly, the command handler, `status`, the capture upload as frames, the learning
+//! update), the liveness rule (`src/liveness.rs`) with the supervisor's verdicts, the
+//! settings -> controller path, the boot's reset-record handling and the panic handler's
+//! safe-state sequence (`reset_reason::{take_last_reset, enter_safe_state}`, the functions
+//! `hw/safe_state.rs` calls), the ADC front end model of the README
 //! (`scaling::front_end_pin_v`, open input included) and the default calibration. Around it,
-//! simulated here: the clock (one tick per sample at the loop rate), the task schedule
-//! (command and heartbeat check in every `TASK_CHECK_IN_S`, the supervisor runs every
-//! `SUPERVISOR_PERIOD_S`, tasks start `BOOT_LOOP_TO_TASKS_S` after the loop), the serial line
-//! at `UART_BAUD` (10 bits a byte, the board's 2048-byte TX buffer; the command task writes an
-//! upload frame only when it fits, and reads the line between frames), a fake IWDG (reset when
-//! not fed for `IWDG_TIMEOUT_S`: the output switch opens), the output switch (closed by the
-//! boot sequence), the DAC output stage (ideal: the code's volts) and the thesis-full stage
-//! (`model_core::closed_loop::FullStage`) closing the loop. `piezo record`'s own receiving
-//! code (`host_tests::board::record`) fetches a capture over the simulated line.
+//! simulated here: the clock (one tick per sample at the loop rate; `rate` re-times it and
+//! the stage), the task schedule (command and heartbeat check in every `TASK_CHECK_IN_S`,
+//! the supervisor runs every `SUPERVISOR_PERIOD_S`, tasks start `BOOT_LOOP_TO_TASKS_S` after
+//! the loop), the serial line at `UART_BAUD` (10 bits a byte, the board's 2048-byte TX
+//! buffer; the command task writes an upload frame only when it fits, and reads the line
+//! between frames), a fake IWDG (reset when not fed for `IWDG_TIMEOUT_S`), the chip's reset
+//! (the output switch opens, RAM is rebuilt except the `.uninit` record, the RCC's IWDG
+//! flag is kept, and after [`STARTUP_S`] the board boots again as `hw/mod.rs` does), the
+//! output switch (closed by the boot sequence), the external DAC (holds its code through a
+//! reset; ideal output stage: the code's volts), the interrupt's cycle count (a constant
+//! [`ISR_CYCLES`] plus [`SWAP_CYCLES`] in a sample that takes a configuration: estimates) and
+//! the thesis-full stage (`model_core::closed_loop::FullStage`) closing the loop. `piezo
+//! record`'s own receiving code (`host_tests::board::record`) fetches a capture over the
+//! simulated line.
 //!
 //! Not here yet (see the issue's closing note): the embassy tasks themselves (the async
 //! bodies in `src/hw/tasks.rs` are thin shells over `App`, but they are not compiled for the
-//! host), the panic path, and the 200 kHz configuration swap's timing (a host cannot measure
-//! the critical section's length).
+//! host), the register writes of the panic handler (`hw::safe_state::Registers`: the
+//! sequence's order and effects are tested here, the GPIO/SPI writes only on the board) and
+//! the interrupt's real cycle counts (a host cannot measure them: the 200 kHz swap test shows
+//! the swap is an index swap, asserted by the configuration lying in the mailbox's slot, and
+//! charges it an estimate against the real budget).
 
 use std::collections::VecDeque;
 use std::sync::atomic::{AtomicU32, Ordering};
@@ -35,7 +46,9 @@ use firmware::design_parameters::{
 use firmware::learn::LearnShared;
 use firmware::liveness::{self, Liveness, TASK_COMMAND, TASK_HEARTBEAT, Verdict};
 use firmware::mailbox::Mailbox;
-use firmware::reset_reason::ResetReason;
+use firmware::reset_reason::{
+    ResetReason, ResetRecord, SafeStateOutputs, enter_safe_state, take_last_reset,
+};
 use firmware::sample::{Links, LoopCore, Requests, Status};
 use firmware::scaling::{self, TimerSetting};
 use firmware::settings::{LoopConfig, Settings};
@@ -43,7 +56,8 @@ use firmware::stats::{CycleStats, SharedStats};
 use host_tests::board::{Link, Options, record};
 use model_core::closed_loop::{FullStage, StageModel};
 use model_core::controller::{ControllerState, Faults};
-use model_core::{AdcCode, params};
+use model_core::stage::{Stage, StageConfig};
+use model_core::{AdcCode, DacCode, params};
 
 /// CPU clock the virtual board reports (the board's 400 MHz).
 const CPU_HZ: u32 = 400_000_000;
@@ -53,8 +67,21 @@ const TIMER_CLOCK_HZ: u32 = 200_000_000;
 const UART_TX_BYTES: usize = 2048;
 /// Size of the board's UART RX buffer (`hw/mod.rs`).
 const UART_RX_BYTES: usize = 256;
-/// Cycles the virtual interrupt reports per sample (any value under the budget).
-const ISR_CYCLES: u32 = 2_000;
+/// Cycles the virtual interrupt reports per sample: 2.5 us at 400 MHz, under the budget at
+/// every rate (1200 cycles at 200 kHz: the 5 us period less the 2 us conversion allowance of
+/// `app::apply_rate_limits`). Our assumption until the board measures `isr_max_us`.
+const ISR_CYCLES: u32 = 1_000;
+/// Cycles the interrupt adds in a sample that takes a new configuration: the mailbox's two
+/// atomic swaps and an index store (`Reader::update`; no copy, the configuration is used in
+/// its slot). Our estimate.
+const SWAP_CYCLES: u32 = 16;
+/// Cycles per byte of a `memcpy` in the interrupt: the README's "about 3 us" for the 4192-byte
+/// configuration the interrupt copied before (1200 cycles at 400 MHz). Only to show what a copy
+/// would cost at 200 kHz.
+const COPY_CYCLES_PER_BYTE: f64 = 1200.0 / 4192.0;
+/// From a reset of the chip to the loop's start (clocks, PLL lock, embassy init), seconds: our
+/// assumption; the output switch is open throughout.
+const STARTUP_S: f64 = 0.001;
 /// Timer ticks from the sampling instant to the DAC write the virtual interrupt reports: the
 /// 0.8 us conversion plus 0.3 us of entry and read at 200 MHz (an estimate; the board measures).
 const WRITE_TICKS: u32 = 220;
@@ -77,6 +104,8 @@ enum Sensor {
 
 struct VirtualBoardHw {
     last_reset: (ResetReason, u32),
+    /// The control timer's rate, as last loaded by `set_rate` (or the boot).
+    rate_hz: f64,
 }
 
 impl Board for VirtualBoardHw {
@@ -86,7 +115,9 @@ impl Board for VirtualBoardHw {
     fn timer_clock_hz(&self) -> u32 {
         TIMER_CLOCK_HZ
     }
-    fn set_rate(&mut self, _t: &TimerSetting) {}
+    fn set_rate(&mut self, t: &TimerSetting) {
+        self.rate_hz = t.rate_hz;
+    }
     fn last_reset(&self) -> (ResetReason, u32) {
         self.last_reset
     }
@@ -102,11 +133,110 @@ struct Trace {
     t_s: f64,
     /// Volts at the amplifier input (0 when the switch is open).
     amp_in_v: f32,
+    /// The output switch was closed during the sample.
+    switch_closed: bool,
     faults: u8,
+}
+
+/// The firmware's RAM: rebuilt from scratch at every boot.
+struct Firmware {
+    links: Links<'static>,
+    core: LoopCore<CAPTURE_RECORDS>,
+    app: App<CAPTURE_RECORDS>,
+    learn: &'static LearnShared,
+    hw: VirtualBoardHw,
+}
+
+/// Steps 1-3 of `hw/mod.rs`'s boot on fresh RAM: the reset record read and cleared
+/// (`reset_reason::take_last_reset`, as `hw::safe_state::take_last_reset` calls it), the
+/// default settings, the interrupt's context with WATCHDOG latched after any reset that was
+/// not a power-on, the command task's `App`.
+fn load_firmware(uninit: &mut ResetRecord, iwdg_flag: bool) -> Firmware {
+    let last_reset = take_last_reset(uninit, iwdg_flag);
+    let links = Links {
+        config: Box::leak(Box::new(Mailbox::<LoopConfig>::new())),
+        requests: Box::leak(Box::new(Requests::new())),
+        liveness: Box::leak(Box::new(Liveness::new())),
+        stats: Box::leak(Box::new(SharedStats::new())),
+        status: Box::leak(Box::new(Status::new())),
+        stall_samples: Box::leak(Box::new(AtomicU32::new(u32::MAX))),
+        budget_cycles: Box::leak(Box::new(AtomicU32::new(u32::MAX))),
+    };
+    let capture: &'static CaptureBuffer<CAPTURE_RECORDS> =
+        Box::leak(Box::new(CaptureBuffer::new()));
+    let learn: &'static LearnShared = Box::leak(Box::new(LearnShared::new()));
+    let settings = Settings::default();
+    let config = settings.loop_config().expect("the default configuration");
+    firmware::app::apply_rate_limits(&links, settings.rate_hz, CPU_HZ);
+    let mut state = ControllerState::new(&config.controller);
+    if last_reset.0 != ResetReason::PowerOn {
+        state.raise(Faults::WATCHDOG);
+    }
+    let core = LoopCore {
+        config: links.config.reader(config).expect("one reader"),
+        state,
+        stats: CycleStats::new(links.budget_cycles.load(Ordering::Relaxed)),
+        capture: capture.producer().expect("one producer"),
+        learn: learn.recorder().expect("one recorder"),
+    };
+    let app = App::new(
+        links,
+        capture,
+        capture.consumer().expect("one consumer"),
+        learn.task().expect("one learning task"),
+        settings,
+    );
+    Firmware {
+        links,
+        core,
+        app,
+        learn,
+        hw: VirtualBoardHw {
+            last_reset,
+            rate_hz: settings.rate_hz,
+        },
+    }
+}
+
+/// The thesis-full stage re-timed to `rate_hz`, at rest at 0 V.
+fn stage_at(rate_hz: f64) -> FullStage {
+    let cfg = StageConfig {
+        period_s: 1.0 / rate_hz,
+        ..StageConfig::thesis_full()
+    };
+    FullStage::new(Stage::new(&cfg).expect("thesis-full stage"), 0.0)
+}
+
+/// What the panic handler's register-free sequence drives on the virtual board.
+struct ChipOutputs<'a> {
+    switch_closed: &'a mut bool,
+    dac_code: &'a mut DacCode,
+    uninit: &'a mut ResetRecord,
+    /// The sequence's steps in the order they ran.
+    log: &'a mut Vec<&'static str>,
+}
+
+impl SafeStateOutputs for ChipOutputs<'_> {
+    fn mask_interrupts(&mut self) {
+        self.log.push("mask");
+    }
+    fn open_output_switch(&mut self) {
+        *self.switch_closed = false;
+        self.log.push("switch");
+    }
+    fn send_dac(&mut self, code: DacCode) {
+        *self.dac_code = code;
+        self.log.push("dac");
+    }
+    fn keep_record(&mut self, record: ResetRecord) {
+        *self.uninit = record;
+        self.log.push("record");
+    }
 }
 
 struct VirtualBoard {
     n: u64,
+    time_s: f64,
     rate_hz: f64,
     links: Links<'static>,
     core: LoopCore<CAPTURE_RECORDS>,
@@ -118,13 +248,29 @@ struct VirtualBoard {
     sensor: Sensor,
     noise_state: u32,
     switch_closed: bool,
+    /// The code the external DAC holds (it keeps it through a reset of the chip).
+    dac_code: DacCode,
     /// The code computed in the previous sample: the interrupt sends it first thing (the DAC
     /// frame at a fixed instant, one sample of computational delay; `hw/control.rs`).
-    next_code: model_core::DacCode,
+    next_code: DacCode,
     /// The amplifier input (the switch's output) during the last sample.
     amp_in_v: f32,
-    /// After an IWDG reset: the chip is in reset, the switch open (the fault tests end here).
+    /// The chip is in reset (after an IWDG bite or a panic) until `boot_at_s`: the switch is
+    /// open (PD15's reset state), nothing runs.
     halted: bool,
+    boot_at_s: f64,
+    /// When the present boot started (the loop runs, the tasks follow
+    /// `BOOT_LOOP_TO_TASKS_S` later).
+    boot_t_s: f64,
+    /// Reset-surviving RAM (`.uninit`): the panic handler's record.
+    uninit: ResetRecord,
+    /// The RCC's IWDG reset flag.
+    iwdg_flag: bool,
+    /// A panic to raise in the next interrupt (its source line).
+    panic_line: Option<u32>,
+    /// The safe-state sequence's steps, in order, of the last panic.
+    safe_state_log: Vec<&'static str>,
+    boots: u32,
     isr_alive: bool,
     heartbeat_alive: bool,
     tasks_started: bool,
@@ -147,58 +293,39 @@ struct VirtualBoard {
 impl VirtualBoard {
     /// Power-on: the boot sequence of `hw/mod.rs` (DAC safe, switch open, loop running).
     fn boot() -> Self {
-        let links = Links {
-            config: Box::leak(Box::new(Mailbox::<LoopConfig>::new())),
-            requests: Box::leak(Box::new(Requests::new())),
-            liveness: Box::leak(Box::new(Liveness::new())),
-            stats: Box::leak(Box::new(SharedStats::new())),
-            status: Box::leak(Box::new(Status::new())),
-            stall_samples: Box::leak(Box::new(AtomicU32::new(u32::MAX))),
-            budget_cycles: Box::leak(Box::new(AtomicU32::new(u32::MAX))),
-        };
-        let capture: &'static CaptureBuffer<CAPTURE_RECORDS> =
-            Box::leak(Box::new(CaptureBuffer::new()));
-        let learn: &'static LearnShared = Box::leak(Box::new(LearnShared::new()));
-        let settings = Settings::default();
-        let config = settings.loop_config().expect("the default configuration");
-        firmware::app::apply_rate_limits(&links, settings.rate_hz, CPU_HZ);
-        let core = LoopCore {
-            config,
-            state: ControllerState::new(&config.controller),
-            stats: CycleStats::new(links.budget_cycles.load(Ordering::Relaxed)),
-            capture: capture.producer().expect("one producer"),
-            learn: learn.recorder().expect("one recorder"),
-        };
-        let app = App::new(
-            links,
-            capture,
-            capture.consumer().expect("one consumer"),
-            learn.task().expect("one learning task"),
-            settings,
-        );
-        Self {
+        let mut uninit = ResetRecord::default();
+        let fw = load_firmware(&mut uninit, false);
+        let safe = DacCode::from_volts(params::SAFE_OUTPUT_V as f32);
+        let mut vb = Self {
             n: 0,
-            rate_hz: settings.rate_hz,
-            links,
-            core,
-            app,
-            learn,
-            hw: VirtualBoardHw {
-                last_reset: (ResetReason::PowerOn, 0),
-            },
-            stage: FullStage::thesis().expect("thesis-full stage"),
+            time_s: 0.0,
+            rate_hz: fw.hw.rate_hz,
+            links: fw.links,
+            core: fw.core,
+            app: fw.app,
+            learn: fw.learn,
+            hw: fw.hw,
+            stage: stage_at(params::SAMPLE_RATE_HZ),
             sensor: Sensor::Connected,
             noise_state: 0x1234_5678,
             switch_closed: false,
-            next_code: model_core::DacCode::from_volts(params::SAFE_OUTPUT_V as f32),
+            dac_code: safe,
+            next_code: safe,
             amp_in_v: 0.0,
             halted: false,
+            boot_at_s: 0.0,
+            boot_t_s: 0.0,
+            uninit,
+            iwdg_flag: false,
+            panic_line: None,
+            safe_state_log: vec![],
+            boots: 0,
             isr_alive: true,
             heartbeat_alive: true,
             tasks_started: false,
-            next_cmd_s: BOOT_LOOP_TO_TASKS_S,
-            next_hb_s: BOOT_LOOP_TO_TASKS_S,
-            next_sup_s: BOOT_LOOP_TO_TASKS_S,
+            next_cmd_s: 0.0,
+            next_hb_s: 0.0,
+            next_sup_s: 0.0,
             sup_last: 0,
             iwdg_unleashed: false,
             last_feed_s: 0.0,
@@ -210,11 +337,69 @@ impl VirtualBoard {
             host_rx: vec![],
             frame: [0; model_core::frame::MAX_FRAME],
             trace: vec![],
+        };
+        vb.start_boot();
+        vb
+    }
+
+    /// The parts of a boot outside the firmware's RAM: DAC at the safe code (step 2), switch
+    /// open until the tasks start, the timer at the default rate, the schedule from now.
+    fn start_boot(&mut self) {
+        let t = self.time_s;
+        self.boots += 1;
+        self.dac_code = DacCode::from_volts(params::SAFE_OUTPUT_V as f32);
+        self.next_code = self.dac_code;
+        self.switch_closed = false;
+        self.halted = false;
+        self.isr_alive = true;
+        self.heartbeat_alive = true;
+        self.tasks_started = false;
+        self.boot_t_s = t;
+        self.next_cmd_s = t + BOOT_LOOP_TO_TASKS_S;
+        self.next_hb_s = t + BOOT_LOOP_TO_TASKS_S;
+        self.next_sup_s = t + BOOT_LOOP_TO_TASKS_S;
+        self.sup_last = 0;
+        self.iwdg_unleashed = false;
+        self.rx.clear();
+        self.tx.clear();
+        self.follow_rate();
+    }
+
+    /// The chip comes out of reset: fresh RAM apart from `.uninit`, the RCC flag read and
+    /// cleared, then the boot.
+    fn reboot(&mut self) {
+        let fw = load_firmware(&mut self.uninit, self.iwdg_flag);
+        self.iwdg_flag = false;
+        self.links = fw.links;
+        self.core = fw.core;
+        self.app = fw.app;
+        self.learn = fw.learn;
+        self.hw = fw.hw;
+        self.start_boot();
+    }
+
+    /// The chip resets (IWDG or `sys_reset`): the switch opens, nothing runs for
+    /// [`STARTUP_S`], then it boots.
+    fn enter_reset(&mut self) {
+        self.halted = true;
+        self.switch_closed = false;
+        self.isr_alive = false;
+        self.tasks_started = false;
+        self.iwdg_unleashed = false;
+        self.boot_at_s = self.time_s + STARTUP_S;
+    }
+
+    /// A new timer rate (`rate`, or the boot's default): the stage model is re-timed (at rest
+    /// at 0 V: `rate` is taken only in safe mode, where the output has ramped to 0 V).
+    fn follow_rate(&mut self) {
+        if self.hw.rate_hz != self.rate_hz {
+            self.rate_hz = self.hw.rate_hz;
+            self.stage = stage_at(self.rate_hz);
         }
     }
 
     fn t_s(&self) -> f64 {
-        self.n as f64 / self.rate_hz
+        self.time_s
     }
 
     fn noise(&mut self, lsb: i16) -> i16 {
@@ -245,44 +430,63 @@ impl VirtualBoard {
     /// One sample period: the interrupt, the stage, the tasks due, the serial line, the IWDG.
     fn tick(&mut self) {
         let t = self.t_s();
-        let mut amp_in_v = 0.0;
-        if self.halted {
-            self.stage.step(0.0);
-            self.trace.push(Trace {
-                t_s: t,
-                amp_in_v,
-                faults: 0,
-            });
-            self.n += 1;
-            return;
-        }
-        if self.isr_alive {
+        if self.isr_alive && !self.halted {
             let raw = self.adc_raw();
-            let sent = self.next_code;
-            let s = self.core.step(&self.links, raw);
-            self.core.finish(&self.links, ISR_CYCLES, false);
-            self.links.status.record_write_ticks(WRITE_TICKS);
-            self.next_code = s.dac;
-            if self.switch_closed {
-                amp_in_v = sent.volts();
+            // The fixed instant: the previous sample's code goes to the DAC first.
+            self.dac_code = self.next_code;
+            if let Some(line) = self.panic_line.take() {
+                // The step panics: the handler's register-free sequence, then `sys_reset`.
+                self.safe_state_log.clear();
+                enter_safe_state(
+                    &mut ChipOutputs {
+                        switch_closed: &mut self.switch_closed,
+                        dac_code: &mut self.dac_code,
+                        uninit: &mut self.uninit,
+                        log: &mut self.safe_state_log,
+                    },
+                    ResetReason::Panic,
+                    line,
+                );
+                self.enter_reset();
+            } else {
+                let swap = self.links.config.pending();
+                let s = self.core.step(&self.links, raw);
+                let cycles = ISR_CYCLES + if swap { SWAP_CYCLES } else { 0 };
+                self.core.finish(&self.links, cycles, false);
+                self.links.status.record_write_ticks(WRITE_TICKS);
+                self.next_code = s.dac;
             }
-        } else if self.switch_closed {
-            amp_in_v = DacCodeHeld::get(self);
         }
+        let amp_in_v = if self.switch_closed {
+            self.dac_code.volts()
+        } else {
+            0.0
+        };
         self.stage.step(amp_in_v);
         self.amp_in_v = amp_in_v;
         self.trace.push(Trace {
             t_s: t,
             amp_in_v,
+            switch_closed: self.switch_closed,
             faults: self.links.status.faults.load(Ordering::Relaxed),
         });
+        let dt = 1.0 / self.rate_hz;
+        self.n += 1;
+        self.time_s += dt;
+        if self.halted {
+            if self.time_s >= self.boot_at_s {
+                self.reboot();
+            }
+            return;
+        }
         // Boot step 5: the switch closes and the tasks start once the loop runs.
-        if !self.tasks_started && t >= BOOT_LOOP_TO_TASKS_S {
+        if !self.tasks_started && t >= self.boot_t_s + BOOT_LOOP_TO_TASKS_S {
             self.tasks_started = true;
             self.switch_closed = true;
         }
         if self.tasks_started {
             self.command_task(t);
+            self.follow_rate();
             while self.heartbeat_alive && self.next_hb_s <= t {
                 self.links.liveness.check_in(TASK_HEARTBEAT);
                 self.next_hb_s += TASK_CHECK_IN_S;
@@ -293,7 +497,7 @@ impl VirtualBoard {
             }
         }
         // The line drains at the baud rate (10 bits a byte).
-        self.tx_credit += f64::from(UART_BAUD) / 10.0 / self.rate_hz;
+        self.tx_credit += f64::from(UART_BAUD) / 10.0 * dt;
         while self.tx_credit >= 1.0 {
             match self.tx.pop_front() {
                 Some(b) => {
@@ -309,7 +513,6 @@ impl VirtualBoard {
         if self.iwdg_unleashed && t - self.last_feed_s > IWDG_TIMEOUT_S {
             self.iwdg_reset();
         }
-        self.n += 1;
     }
 
     /// The command task: wakes on received bytes, an upload frame that fits, or its check-in
@@ -356,19 +559,12 @@ impl VirtualBoard {
         }
     }
 
-    /// The IWDG bites: the switch opens (reset state of PD15), and the board stops here (the
-    /// fault tests end at the reset; a reboot is a new `VirtualBoard`).
+    /// The IWDG bites: the RCC flag is set and the chip resets (the switch opens), then
+    /// boots again.
     fn iwdg_reset(&mut self) {
         self.iwdg_resets += 1;
-        self.halted = true;
-        self.switch_closed = false;
-        self.isr_alive = false;
-        self.iwdg_unleashed = false;
-        self.tasks_started = false;
-        self.heartbeat_alive = false;
-        self.next_cmd_s = f64::INFINITY;
-        self.next_hb_s = f64::INFINITY;
-        self.next_sup_s = f64::INFINITY;
+        self.iwdg_flag = true;
+        self.enter_reset();
     }
 
     fn run_s(&mut self, seconds: f64) {
@@ -381,6 +577,11 @@ impl VirtualBoard {
     /// Sends a line as the host would and runs until its reply line arrives.
     fn command(&mut self, line: &str) -> String {
         self.host_send(line);
+        self.reply(line)
+    }
+
+    /// Runs until a reply line arrives (at most 1 s); `line` names the command it answers.
+    fn reply(&mut self, line: &str) -> String {
         for _ in 0..(self.rate_hz as u64) {
             self.tick();
             if let Some(p) = self.host_rx.windows(2).position(|w| w == b"\r\n") {
@@ -403,14 +604,6 @@ impl VirtualBoard {
 
     fn faults(&self) -> Faults {
         Faults(self.links.status.faults.load(Ordering::Relaxed))
-    }
-}
-
-/// The command the DAC holds when the interrupt has stopped: its last code.
-struct DacCodeHeld;
-impl DacCodeHeld {
-    fn get(vb: &VirtualBoard) -> f32 {
-        model_core::DacCode::new(Status::load_i16(&vb.links.status.u)).volts()
     }
 }
 
@@ -579,7 +772,7 @@ fn nan_reference_latches_nonfinite() {
     let mut vb = closed_loop_at("5v");
     let t0 = vb.t_s();
     // The parser refuses "nan"; a corrupted configuration is the only way in: post one.
-    let mut cfg = vb.core.config;
+    let mut cfg = *vb.core.config.get();
     cfg.reference_v = f32::NAN;
     assert!(vb.links.config.post(cfg));
     vb.run_s(0.02);
@@ -616,6 +809,50 @@ fn stalled_task_raises_watchdog_ramps_to_safe_then_the_iwdg_resets() {
         "ramped, not stepped: {step}"
     );
     assert_eq!(vb.iwdg_resets, 1, "then the IWDG resets the chip");
+    back_in_safe_after_the_watchdog(&mut vb, "stalled heartbeat");
+}
+
+/// After an IWDG reset: the board boots again in safe mode with `last_reset=watchdog` and
+/// WATCHDOG latched (`hw/mod.rs`), the output at the safe value; over the next second no
+/// other fault, no second reset; `clear` leaves it fault-free.
+fn back_in_safe_after_the_watchdog(vb: &mut VirtualBoard, what: &str) {
+    assert_eq!(vb.boots, 2, "{what}: rebooted once");
+    let st = vb.command("status");
+    assert!(st.starts_with("ok mode=safe"), "{what}: {st}");
+    assert_eq!(field(&st, "last_reset"), "watchdog", "{st}");
+    assert_eq!(
+        field(&st, "faults"),
+        "0x10",
+        "WATCHDOG latched at boot: {st}"
+    );
+    let t0 = vb.t_s();
+    vb.run_s(1.0);
+    let after: Vec<&Trace> = vb.trace.iter().filter(|s| s.t_s >= t0).collect();
+    let other_faults = after
+        .iter()
+        .map(|s| s.faults & !Faults::WATCHDOG.0)
+        .fold(0, |a, b| a | b);
+    let max_out = after
+        .iter()
+        .map(|s| s.amp_in_v.abs())
+        .fold(0.0f32, f32::max);
+    assert_eq!(
+        other_faults, 0,
+        "{what}: no other fault in the second after"
+    );
+    assert_eq!(vb.iwdg_resets, 1, "{what}: no second reset");
+    assert!(
+        after.last().is_some_and(|s| s.switch_closed),
+        "{what}: switch closed again"
+    );
+    assert_eq!(max_out, 0.0, "{what}: the output stays at the safe value");
+    assert_eq!(vb.command("clear"), "ok cleared");
+    vb.run_s(0.1);
+    let st = vb.command("status");
+    assert_eq!(field(&st, "faults"), "0x00", "{st}");
+    println!(
+        "{what}: rebooted in safe mode, last_reset=watchdog, 1 s with no other fault and no second reset, output {max_out} V; after clear: faults 0x00"
+    );
 }
 
 #[test]
@@ -632,6 +869,147 @@ fn stalled_interrupt_is_reset_by_the_iwdg() {
     );
     assert_eq!(vb.iwdg_resets, 1);
     assert!(t <= IWDG_TIMEOUT_S + SUPERVISOR_PERIOD_S + 1e-3, "{t}");
+    back_in_safe_after_the_watchdog(&mut vb, "stalled interrupt");
+}
+
+/// Issue 13 item 1, the panic path: the handler's register-free sequence
+/// (`reset_reason::enter_safe_state`, the one `hw::safe_state` runs) on a panic in the
+/// interrupt: the switch opens within the sample, then the DAC gets the safe code, the reason
+/// goes to `.uninit`; after the reset the board boots in safe mode and `status` names the
+/// panic and its line. While the switch is closed the output never moves by more than the
+/// safe ramp's step.
+#[test]
+fn a_panic_opens_the_switch_keeps_the_reason_and_the_board_reboots_safe() {
+    const LINE: u32 = 4242;
+    let mut vb = closed_loop_at("5v");
+    let before = vb.trace.last().copied().expect("a trace");
+    assert!(before.switch_closed && before.amp_in_v > 4.0, "{before:?}");
+    let t0 = vb.t_s();
+    vb.panic_line = Some(LINE);
+    vb.tick();
+    let at = vb.trace.last().copied().expect("a trace");
+    println!(
+        "panic at {:.4} s: sequence {:?}, output {:.3} V -> {:.3} V in the panic's sample, DAC holds {:.3} V, .uninit {:x?}",
+        t0,
+        vb.safe_state_log,
+        before.amp_in_v,
+        at.amp_in_v,
+        vb.dac_code.volts(),
+        vb.uninit
+    );
+    assert_eq!(vb.safe_state_log, ["mask", "switch", "dac", "record"]);
+    assert!(
+        !at.switch_closed && at.amp_in_v == 0.0,
+        "switch open within the sample"
+    );
+    assert_eq!(
+        vb.dac_code,
+        DacCode::from_volts(params::SAFE_OUTPUT_V as f32)
+    );
+    assert_eq!(vb.uninit.decode(), Some((ResetReason::Panic, LINE)));
+    vb.run_s(0.5);
+    assert_eq!(vb.boots, 2, "rebooted");
+    let st = vb.command("status");
+    println!("after the reboot: {st}");
+    assert!(st.starts_with("ok mode=safe"), "{st}");
+    assert_eq!(field(&st, "last_reset"), "panic", "{st}");
+    assert_eq!(field(&st, "detail"), format!("0x{LINE:x}"), "{st}");
+    assert_eq!(field(&st, "faults"), "0x10", "WATCHDOG latched: {st}");
+    assert_eq!(vb.uninit, ResetRecord::default(), "the record was taken");
+    // The trajectory from the panic on: while the switch is closed (before the panic and
+    // after the reboot), no move beyond the safe ramp's step plus one DAC LSB.
+    let ramp_step = (params::SAFE_RAMP_INPUT_V_PER_S / params::SAMPLE_RATE_HZ) as f32;
+    let after: Vec<&Trace> = vb.trace.iter().filter(|s| s.t_s >= t0).collect();
+    let worst = after
+        .windows(2)
+        .filter(|w| w[0].switch_closed && w[1].switch_closed)
+        .map(|w| (w[1].amp_in_v - w[0].amp_in_v).abs())
+        .fold(0.0f32, f32::max);
+    let closed_again = after
+        .iter()
+        .find(|s| s.switch_closed)
+        .map(|s| s.t_s - t0)
+        .expect("the switch closes after the reboot");
+    println!(
+        "panic: switch closed again {:.1} ms after the panic at {:.3} V, largest move while closed {:.1} mV/sample",
+        closed_again * 1e3,
+        after
+            .iter()
+            .find(|s| s.switch_closed)
+            .map_or(f32::NAN, |s| s.amp_in_v),
+        worst * 1e3
+    );
+    assert!(worst <= ramp_step + DacCode::VOLT_PER_LSB + 1e-6, "{worst}");
+    assert_eq!(vb.command("clear"), "ok cleared");
+    let st = vb.command("status");
+    assert_eq!(field(&st, "faults"), "0x00", "{st}");
+}
+
+/// Issue 13 item 1, the configuration swap at 200 kHz: with `rate 200khz` and a `kc` change
+/// in closed loop, the interrupt takes the new configuration at its next sample as an index
+/// swap (the value in force lies in the mailbox's slot: no copy), so with the real budget
+/// (`app::apply_rate_limits` at 200 kHz) no OVERRUN is raised. A copy of the configuration in
+/// the interrupt, as before, would not fit the budget.
+#[test]
+fn a_configuration_swap_at_200_khz_is_an_index_swap_without_overrun() {
+    let mut vb = VirtualBoard::boot();
+    vb.run_s(0.05);
+    assert_eq!(vb.command("rate 200khz"), "ok rate_hz 200000.000");
+    assert_eq!(vb.rate_hz, 200_000.0);
+    assert_eq!(vb.command("ref step 5v"), "ok ref");
+    assert_eq!(vb.command("mode closed"), "ok mode closed");
+    vb.run_s(0.2);
+    assert!(vb.faults().is_empty(), "{:?}", vb.faults());
+    let budget = vb.links.budget_cycles.load(Ordering::Relaxed);
+    vb.host_send("kc 5000");
+    let mut posted_at = None;
+    for _ in 0..(0.1 * vb.rate_hz) as u32 {
+        vb.tick();
+        if vb.links.config.pending() {
+            posted_at = Some(vb.n);
+            break;
+        }
+    }
+    let posted_at = posted_at.expect("the kc change posted");
+    let want = vb
+        .app
+        .settings()
+        .loop_config()
+        .expect("the new settings")
+        .controller;
+    assert_ne!(
+        vb.core.config.get().controller,
+        want,
+        "not in force before the next sample"
+    );
+    vb.tick();
+    let in_force = vb.core.config.get();
+    assert_eq!(in_force.controller, want, "in force at the next sample");
+    assert!(
+        vb.links.config.holds(in_force),
+        "used in its mailbox slot, not copied"
+    );
+    assert_eq!(vb.n - posted_at, 1);
+    assert_eq!(vb.reply("kc 5000"), "ok kc 5000");
+    vb.run_s(0.1);
+    let st = vb.command("status");
+    let copy_cycles = (std::mem::size_of::<LoopConfig>() as f64 * COPY_CYCLES_PER_BYTE) as u32;
+    println!(
+        "200 kHz swap: taken 1 sample after the post, budget {budget} cycles, the swap's sample {} cycles (a copy of the {} B configuration would be {} cycles); {st}",
+        ISR_CYCLES + SWAP_CYCLES,
+        std::mem::size_of::<LoopConfig>(),
+        ISR_CYCLES + copy_cycles,
+    );
+    assert_eq!(
+        budget, 1_200,
+        "5 us at 400 MHz less the 2 us conversion allowance"
+    );
+    assert_eq!(field(&st, "overruns"), "0", "{st}");
+    assert_eq!(field(&st, "faults"), "0x00", "{st}");
+    assert!(
+        ISR_CYCLES + copy_cycles > budget,
+        "a copy in the interrupt would overrun"
+    );
 }
 
 #[test]

@@ -16,8 +16,8 @@
 //! **one** model-core function, `Controller::step`: modes, fault latch and safe ramp, lag
 //! compensator, limits, the same function the QEMU runs call; capture and status), write the
 //! DAC, and time the whole with the DWT cycle counter (`LoopCore::finish`: max, mean,
-//! overruns). Nothing in here waits, allocates, panics or locks for longer than the copy of a
-//! configuration when one is pending.
+//! overruns). Nothing in here waits, allocates, panics or locks; a new configuration is an
+//! index swap (`firmware::mailbox::Reader::update`), used where it lies.
 
 use core::cell::Cell;
 use core::sync::atomic::Ordering;
@@ -51,8 +51,8 @@ pub fn install(ctx: LoopContext) {
 }
 
 // In ITCM (zero wait states, no cache misses): `memory.x`, copied by `super::load_itcm`.
-// What it calls and does not inline (the hysteresis inverse, `memcpy` of a new
-// configuration) stays in flash behind the instruction cache.
+// What it calls and does not inline (the hysteresis inverse) stays in flash behind the
+// instruction cache.
 #[interrupt]
 #[unsafe(link_section = ".itcm.adc")]
 fn ADC() {

@@ -181,7 +181,10 @@ async fn main(spawner: Spawner) {
     firmware::app::apply_rate_limits(&shared::LINKS, setting.rate_hz, board::CPU_HZ);
     control::install(control::LoopContext {
         core: LoopCore {
-            config,
+            config: match shared::CONFIG.reader(config) {
+                Some(r) => r,
+                None => defmt::panic!("the configuration reader is taken once"),
+            },
             state,
             stats: CycleStats::new(shared::BUDGET_CYCLES.load(Ordering::Relaxed)),
             capture: producer,

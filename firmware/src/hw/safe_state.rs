@@ -13,6 +13,9 @@
 //!    prints it (`last_reset=panic detail=<line>`), and the controller boots with WATCHDOG
 //!    latched so the loop stays in safe until `clear`.
 //!
+//! Steps 1-3 are `firmware::reset_reason::enter_safe_state` (register-free, run by the
+//! virtual board's panic test) over this file's `Registers`; step 4 is here.
+//!
 //! No logging here: nothing in the path can wait for a host.
 
 use core::mem::MaybeUninit;
@@ -21,8 +24,8 @@ use core::sync::atomic::{AtomicU32, Ordering};
 
 use cortex_m_rt::{ExceptionFrame, exception};
 use embassy_stm32::pac;
-use firmware::reset_reason::{ResetReason, ResetRecord};
-use model_core::{DacCode, params};
+use firmware::reset_reason::{self, ResetReason, ResetRecord, SafeStateOutputs};
+use model_core::DacCode;
 
 /// The record that survives the reset (cortex-m-rt's `.uninit` section: NOLOAD, not zeroed).
 #[unsafe(link_section = ".uninit.RESET_RECORD")]
@@ -41,47 +44,62 @@ pub fn take_last_reset(iwdg_flag: bool) -> (ResetReason, u32) {
     // any interrupt is enabled) and the fault handlers (which never return) touch; any bit
     // pattern is a valid `ResetRecord` of `u32`s, and the volatile accesses keep the compiler
     // from assuming anything about memory the start-up code did not initialise.
-    let rec = unsafe { p.read_volatile() };
-    // SAFETY: as above; clearing makes the next power-on read "no record".
-    unsafe { p.write_volatile(ResetRecord::default()) };
-    let (reason, detail) = rec.last_reset(iwdg_flag);
+    let mut rec = unsafe { p.read_volatile() };
+    let (reason, detail) = reset_reason::take_last_reset(&mut rec, iwdg_flag);
+    // SAFETY: as above; the cleared record makes the next power-on read "no record".
+    unsafe { p.write_volatile(rec) };
     LAST_RESET_REASON.store(reason.code(), Ordering::Relaxed);
     LAST_RESET_DETAIL.store(detail, Ordering::Relaxed);
     (reason, detail)
 }
 
-/// Steps 1-4 of the module note. Never returns.
-fn enter_safe_state(reason: ResetReason, detail: u32) -> ! {
-    cortex_m::interrupt::disable();
-    // 1. Output switch open (PD15 low) before anything else.
-    pac::GPIOD.bsrr().write(|w| w.set_br(15, true));
-    // 2. The safe code to the DAC.
-    let safe = DacCode::from_volts(params::SAFE_OUTPUT_V as f32);
-    #[cfg(not(feature = "internal-dac"))]
-    {
-        let spi = pac::SPI1;
-        pac::GPIOD.bsrr().write(|w| w.set_bs(14, true)); // SYNC high: end any frame
-        pac::GPIOD.bsrr().write(|w| w.set_br(14, true)); // SYNC low: a new frame
-        spi.txdr16().write_value(safe.spi_frame());
-        spi.cr1().modify(|w| w.set_cstart(true));
-        // 16 bits at 12.5 MHz = 1.3 us; bounded in case SPI1 was never configured.
-        let mut spins = 0u32;
-        while !spi.sr().read().txc() && spins < 10_000 {
-            spins += 1;
-        }
-        pac::GPIOD.bsrr().write(|w| w.set_bs(14, true)); // SYNC high: latch
+/// The registers behind `firmware::reset_reason::enter_safe_state`.
+struct Registers;
+
+impl SafeStateOutputs for Registers {
+    fn mask_interrupts(&mut self) {
+        cortex_m::interrupt::disable();
     }
-    #[cfg(feature = "internal-dac")]
-    pac::DAC1
-        .dhr12r(0)
-        .write(|w| w.set_dhr(firmware::scaling::internal_dac_value(safe)));
-    // 3. The reason, kept across the reset.
-    let p = (&raw mut RECORD).cast::<ResetRecord>();
-    // SAFETY: interrupts are masked and this handler never returns, so nothing else touches
-    // the record; the pointer is to four aligned words of RAM.
-    unsafe { p.write_volatile(ResetRecord::encode(reason, detail)) };
-    cortex_m::asm::dsb();
-    // 4. Reset.
+
+    fn open_output_switch(&mut self) {
+        pac::GPIOD.bsrr().write(|w| w.set_br(15, true));
+    }
+
+    fn send_dac(&mut self, code: DacCode) {
+        #[cfg(not(feature = "internal-dac"))]
+        {
+            let spi = pac::SPI1;
+            pac::GPIOD.bsrr().write(|w| w.set_bs(14, true)); // SYNC high: end any frame
+            pac::GPIOD.bsrr().write(|w| w.set_br(14, true)); // SYNC low: a new frame
+            spi.txdr16().write_value(code.spi_frame());
+            spi.cr1().modify(|w| w.set_cstart(true));
+            // 16 bits at 12.5 MHz = 1.3 us; bounded in case SPI1 was never configured.
+            let mut spins = 0u32;
+            while !spi.sr().read().txc() && spins < 10_000 {
+                spins += 1;
+            }
+            pac::GPIOD.bsrr().write(|w| w.set_bs(14, true)); // SYNC high: latch
+        }
+        #[cfg(feature = "internal-dac")]
+        pac::DAC1
+            .dhr12r(0)
+            .write(|w| w.set_dhr(firmware::scaling::internal_dac_value(code)));
+    }
+
+    fn keep_record(&mut self, record: ResetRecord) {
+        let p = (&raw mut RECORD).cast::<ResetRecord>();
+        // SAFETY: interrupts are masked (the sequence's first step) and the handler never
+        // returns, so nothing else touches the record; the pointer is to four aligned words
+        // of RAM.
+        unsafe { p.write_volatile(record) };
+        cortex_m::asm::dsb();
+    }
+}
+
+/// Steps 1-3 of the module note (`firmware::reset_reason::enter_safe_state`, host-tested on
+/// the virtual board), then step 4, the reset. Never returns.
+fn enter_safe_state(reason: ResetReason, detail: u32) -> ! {
+    reset_reason::enter_safe_state(&mut Registers, reason, detail);
     cortex_m::peripheral::SCB::sys_reset()
 }
 
