@@ -1229,3 +1229,46 @@ fn learning_a_100_hz_sine_cuts_the_error_reset_clears_and_a_fault_stops_it() {
         "err learn needs closed loop without faults"
     );
 }
+
+/// A new reference while learning stops it before the new configuration is posted (the
+/// interrupt never adds the old table to the new trajectory), and `learn on` starts again
+/// on the new repeat; `learn freeze` keeps the table in force without updates.
+#[test]
+fn a_new_reference_stops_learning_and_freeze_keeps_the_table() {
+    let mut vb = VirtualBoard::boot();
+    vb.run_s(0.05);
+    assert_eq!(vb.command("ref triangle 4v 2v 100hz"), "ok ref");
+    assert_eq!(vb.command("mode closed"), "ok mode closed");
+    vb.run_s(0.3);
+    assert_eq!(vb.command("learn on"), "ok learn on period_samples=500");
+    vb.run_s(0.1);
+    assert_eq!(vb.command("learn freeze"), "ok learn frozen");
+    let st = vb.command("status");
+    let frozen_iter = field(&st, "learn_iter").to_string();
+    let frozen_rms: f32 = field(&st, "learn_rms_v").parse().unwrap();
+    vb.run_s(0.05);
+    let st = vb.command("status");
+    println!("frozen: {st}");
+    assert_eq!(field(&st, "learn"), "frozen:requested", "{st}");
+    assert_eq!(
+        field(&st, "learn_iter"),
+        frozen_iter,
+        "no update while frozen"
+    );
+    let rms: f32 = field(&st, "learn_rms_v").parse().unwrap();
+    assert!(vb.learn.enabled(), "the table stays in force");
+    assert!(rms < 2.0 * frozen_rms.max(2e-3), "{frozen_rms} -> {rms}");
+    assert_eq!(vb.command("ref sine 4v 2v 50hz"), "ok ref");
+    let st = vb.command("status");
+    println!("after a new reference: {st}");
+    assert_eq!(field(&st, "learn"), "stopped:reference_changed", "{st}");
+    assert!(!vb.learn.enabled(), "no correction on the new reference");
+    vb.run_s(0.1);
+    assert!(vb.faults().is_empty());
+    assert_eq!(vb.command("learn on"), "ok learn on period_samples=1000");
+    vb.run_s(0.1);
+    let st = vb.command("status");
+    assert_eq!(field(&st, "learn"), "learning", "{st}");
+    assert_eq!(vb.command("learn off"), "ok learn off");
+    assert!(!vb.learn.enabled());
+}
