@@ -146,8 +146,12 @@ pub struct LearningConfig {
     pub cutoff_hz: f64,
     /// A repeat's RMS error above this times the last one's counts as growth; in (1, 10].
     pub growth_ratio: f64,
-    /// Largest correction the table may hold, volts; in (0, 10].
+    /// Allowance of the table's clamp for what the linear design model does not predict
+    /// (hysteresis, drift, a stage off the model), volts; in (0, 10]. The clamp is this plus
+    /// [`Self::correction_margin`] times the predicted peak ([`Learning::predicted_peak_v`]).
     pub max_correction_v: f64,
+    /// Factor on the predicted peak of the converged table in the clamp; in [1, 10].
+    pub correction_margin: f64,
     /// Time constant of the learning filter's own planning poles, seconds (the pre-filter's
     /// range, `params::PREFILTER_TAU_MIN_S..=PREFILTER_TAU_MAX_S`).
     pub tau_s: f64,
@@ -162,6 +166,7 @@ impl Default for LearningConfig {
             cutoff_hz: 12_000.0,
             growth_ratio: 1.1,
             max_correction_v: 1.0,
+            correction_margin: 2.0,
             tau_s: 20e-6,
         }
     }
@@ -179,6 +184,7 @@ pub struct Learning {
     q_pole: f32,
     q_periodic: f32,
     growth_ratio_sq: f32,
+    predicted_peak_v: f32,
     max_correction_v: f32,
 }
 
@@ -310,6 +316,24 @@ impl Learning {
             Excluded(0.0),
             Included(10.0),
         )?;
+        let margin = check_range(
+            "correction_margin",
+            config.correction_margin,
+            Included(1.0),
+            Included(10.0),
+        )?;
+        let plan = PreFilter::new(
+            &controller.lag,
+            &plant,
+            &PreFilterConfig {
+                mode: PreFilterMode::Planning,
+                tau_s: config.tau_s,
+                ..controller.prefilter
+            },
+        )?;
+        let warm = WARM_SAMPLES.div_ceil(n) * n;
+        let predicted =
+            converged_peak(&filter, &plan, &c.prefilter, &controller.reference, n, warm)?;
         let p = exp(-2.0 * PI * fc * t);
         let p_n = exp(-2.0 * PI * fc * t * n as f64);
         Ok(Self {
@@ -317,13 +341,25 @@ impl Learning {
             generator: c.generator,
             period: n,
             advance: filter.preview_samples() % n,
-            warm: WARM_SAMPLES.div_ceil(n) * n,
+            warm,
             gain: gain as f32,
             q_pole: p as f32,
             q_periodic: (1.0 / (1.0 - p_n)) as f32,
             growth_ratio_sq: (growth * growth) as f32,
-            max_correction_v: max_c as f32,
+            predicted_peak_v: predicted,
+            max_correction_v: (max_c + margin * predicted as f64) as f32,
         })
+    }
+
+    /// Peak of the table the learning converges to on the design model, volts (before Q).
+    pub fn predicted_peak_v(&self) -> f32 {
+        self.predicted_peak_v
+    }
+
+    /// The table's clamp, volts: [`LearningConfig::max_correction_v`] plus
+    /// [`LearningConfig::correction_margin`] times [`Self::predicted_peak_v`].
+    pub fn max_correction_v(&self) -> f32 {
+        self.max_correction_v
     }
 
     /// Samples in one repeat: the length of the table and of the error record.
@@ -466,6 +502,50 @@ impl Learning {
         self.robustness_filter(table);
         st.iteration = st.iteration.saturating_add(1);
         st.status
+    }
+}
+
+/// Peak over one repeat of `Lf(r) - F_s P(r)`: the correction that makes the design loop
+/// follow what the learning filter's own planning poles `F_s` plan, less what the loop's
+/// pre-filter `P` (with its preview, any mode) already asks for. On the design model
+/// `T Lf(r) = F_s r` and `T P(r) = r - e0`, so this is `Lf(e0)`, the table the learning
+/// converges to before Q. Each filter runs from rest on the generator (its own preview)
+/// over `warm` samples, then one repeat is kept. Design time; bounded by `warm + n` steps.
+fn converged_peak(
+    filter: &PreFilter,
+    plan: &PreFilter,
+    loop_filter: &PreFilter,
+    reference: &crate::reference::ReferenceConfig,
+    n: u32,
+    warm: u32,
+) -> Result<f32, ConfigError> {
+    let ga = ReferenceGenerator::new(reference, filter.preview_samples())?;
+    let gb = ReferenceGenerator::new(
+        reference,
+        loop_filter.preview_samples() + plan.preview_samples(),
+    )?;
+    let (mut sa, mut sb) = (ga.start(), gb.start());
+    let r0 = ga.now(&sa);
+    let (mut fa, mut fp, mut fs) = (
+        filter.settled_state(r0),
+        loop_filter.settled_state(r0),
+        plan.settled_state(r0),
+    );
+    let mut peak = 0.0f32;
+    for k in 0..warm + n {
+        let a = filter.step(&mut fa, ga.next(&mut sa));
+        let b = plan.step(&mut fs, loop_filter.step(&mut fp, gb.next(&mut sb)));
+        if k >= warm {
+            peak = peak.max((a - b).abs());
+        }
+    }
+    if peak.is_finite() {
+        Ok(peak)
+    } else {
+        Err(ConfigError::new(
+            "reference",
+            crate::limits::Reason::NotFinite,
+        ))
     }
 }
 

@@ -211,6 +211,9 @@ pub struct TrackRun {
     pub learn_limited_samples: usize,
     /// Lowest and highest command during the learning repeats, volts.
     pub learn_command_range_v: (f64, f64),
+    /// Largest |value| of the learned table in force, its clamp and the clamp's predicted
+    /// part ([`Learning::predicted_peak_v`]), volts (0 without learning).
+    pub learn_table_peak_v: (f64, f64, f64),
 }
 
 impl TrackRun {
@@ -370,6 +373,7 @@ pub fn simulate(spec: &TrackSpec, record: bool) -> anyhow::Result<TrackRun> {
         learn_status: learn.status,
         learn_limited_samples: learn.limited,
         learn_command_range_v: learn.command_range_v,
+        learn_table_peak_v: learn.table_peak_v,
     })
 }
 
@@ -391,6 +395,7 @@ struct Learned {
     status: Option<Status>,
     limited: usize,
     command_range_v: (f64, f64),
+    table_peak_v: (f64, f64, f64),
 }
 
 /// Run on to the start of the generator's repeat, then `spec.learn_periods` repeats of
@@ -445,6 +450,11 @@ fn learn_repeats(
         };
         out.status = Some(l.update(&mut st, table, &mut scratch, &period));
     }
+    out.table_peak_v = (
+        table.iter().fold(0.0f64, |a, &c| a.max((c as f64).abs())),
+        l.max_correction_v() as f64,
+        l.predicted_peak_v() as f64,
+    );
     Ok(out)
 }
 
