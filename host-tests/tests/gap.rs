@@ -510,7 +510,7 @@ fn bad_models_give_clear_errors() {
     assert!(format!("{e:#}").contains("creep"));
     let n = params::PLAY_OPERATORS;
     let bad_hyst = format!(
-        "{good}\n[hysteresis-play]\nradii_v = {:?}\nweights = [5.0{}]\n",
+        "{good}\n[hysteresis-play]\nradii_v = {:?}\nweights = [500.0{}]\n",
         params::PLAY_RADII_V,
         ", 0.0".repeat(n - 1)
     );

@@ -66,3 +66,9 @@ pub const JUMP_RATIO: f64 = 4.0;
 /// assumption: a lag of 400 s on a 10 s sine record moved by a few per cent and took the part
 /// of a sensor offset; thesis-full's 12 s lag sits well inside 2x a 20..150 s slow record).
 pub const DRIFT_TAU_MAX_RECORDS: f64 = 2.0;
+
+/// The rising-minus-falling gap of the residual ([`super::signatures::Signatures::loop_v`])
+/// that `hysteresis` needs, in noise floors (our assumption: under noise alone the largest
+/// gap between two bin means of 20 samples or more stays near one noise sigma; three is a
+/// loop, not noise; a sensor-gain error with 1 mV of noise shows 0.5 mV, a real loop hundreds).
+pub const HYST_LOOP_MIN_NOISE: f64 = 3.0;

@@ -49,6 +49,7 @@ pub mod catalogue;
 pub mod constants;
 pub mod data;
 pub mod demo;
+pub mod everett;
 pub mod fast_fit;
 pub mod nnls;
 pub mod polish;
