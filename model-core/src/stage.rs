@@ -463,6 +463,14 @@ impl Stage {
         self.fast(&mut mem, ue) + drift
     }
 
+    /// The input, volts at the amplifier, at which [`Self::static_output`] is `y_v`: the
+    /// operating point of a loop holding `y_v`. Bisection over `[lo_v, hi_v]` (the static map
+    /// is strictly increasing); outside the map's range, or for a non-finite `y_v`, the nearer
+    /// end (`lo_v` for NaN). Design time, bounded (32 halvings: below f32 resolution).
+    pub fn static_input(&self, y_v: f32, lo_v: f32, hi_v: f32) -> f32 {
+        bisect_increasing(|u| self.static_output(u), y_v, lo_v, hi_v)
+    }
+
     /// The hysteresis table, if on.
     pub fn hysteresis(&self) -> Option<&HysteresisTable> {
         self.hysteresis.as_ref()
@@ -619,27 +627,15 @@ impl Feedforward {
             .as_ref()
             .map_or(0.0, |d| d.output(&s.drift));
         let want = r_v - drift_v;
-        let (mut a, mut b) = (self.lo_v, self.hi_v);
+        let (a, b) = (self.lo_v, self.hi_v);
         let st = &self.stage;
         let u = if let Some(t) = &st.hysteresis {
             let k = st.scale(s.last_v, 1.0);
             let u = t.inverse(&mut s.hysteresis, want / k);
             // The table clamps to its own range; the window may be narrower.
             clamp_f32(u, a, b)
-        } else if !want.is_finite() || st.fast_memoryless(a) >= want {
-            a
-        } else if st.fast_memoryless(b) <= want {
-            b
         } else {
-            for _ in 0..32 {
-                let m = 0.5 * (a + b);
-                if st.fast_memoryless(m) < want {
-                    a = m;
-                } else {
-                    b = m;
-                }
-            }
-            0.5 * (a + b)
+            bisect_increasing(|u| st.fast_memoryless(u), want, a, b)
         };
         s.last_v = u;
         if let Some(d) = &self.stage.drift {
@@ -647,4 +643,26 @@ impl Feedforward {
         }
         u
     }
+}
+
+/// The `u` in `[lo, hi]` where the increasing `f` reaches `want`, by 32 halvings (below f32
+/// resolution over the amplifier's range); the nearer end if `want` lies outside
+/// `f([lo, hi])`, `lo` if it is not finite. Bounded: no panic, no unbounded loop.
+fn bisect_increasing(f: impl Fn(f32) -> f32, want: f32, lo: f32, hi: f32) -> f32 {
+    let (mut a, mut b) = (lo, hi);
+    if !want.is_finite() || f(a) >= want {
+        return a;
+    }
+    if f(b) <= want {
+        return b;
+    }
+    for _ in 0..32 {
+        let m = 0.5 * (a + b);
+        if f(m) < want {
+            a = m;
+        } else {
+            b = m;
+        }
+    }
+    0.5 * (a + b)
 }

@@ -407,19 +407,7 @@ pub fn diagnose(base: &ModelFile, data: &[Data], opts: &Options) -> anyhow::Resu
             &swaps,
             |(e, f)| -> Option<(ModelFile, Vec<Vec<f64>>, Vec<f64>)> {
                 let m = catalogue::revert(&model, base, e);
-                let mut set: Vec<&str> = SLOW
-                    .iter()
-                    .copied()
-                    .filter(|x| catalogue::present(&m, x))
-                    .collect();
-                set.push(f.as_str());
-                let b0 = catalogue::without_slow(&m);
-                let y0: Vec<Vec<f64>> = data
-                    .iter()
-                    .map(|d| sim(&b0, d).ok())
-                    .collect::<Option<_>>()?;
-                let p = fit_slow(data, &y0, &slow_x, &set, u_range)?;
-                let m = catalogue::with_slow(&m, &p, u_range)?;
+                let m = refit_slow(&m, Some(f.as_str()), data, &slow_x, u_range)?;
                 let s: Vec<Vec<f64>> = data
                     .iter()
                     .map(|d| sim(&m, d).ok())
@@ -594,23 +582,41 @@ fn reverted_refit(
     slow_x: &SlowRegressors,
     u_range: (f64, f64),
 ) -> Option<ModelFile> {
-    let m = catalogue::revert(model, base, effect);
-    let set: Vec<&str> = SLOW
+    refit_slow(
+        &catalogue::revert(model, base, effect),
+        None,
+        data,
+        slow_x,
+        u_range,
+    )
+}
+
+/// `m` with its slow effects, and `extra` if given, fitted afresh together to the residual of
+/// `m` without slow effects; `m` itself if it has none and no `extra`.
+fn refit_slow(
+    m: &ModelFile,
+    extra: Option<&str>,
+    data: &[Data],
+    slow_x: &SlowRegressors,
+    u_range: (f64, f64),
+) -> Option<ModelFile> {
+    let mut set: Vec<&str> = SLOW
         .iter()
         .copied()
-        .filter(|e| catalogue::present(&m, e))
+        .filter(|e| catalogue::present(m, e))
         .collect();
+    set.extend(extra);
     if set.is_empty() {
-        return Some(m);
+        return Some(m.clone());
     }
-    let b0 = catalogue::without_slow(&m);
+    let b0 = catalogue::without_slow(m);
     let y0: Vec<Vec<f64>> = data
         .iter()
         .map(|d| sim(&b0, d))
         .collect::<anyhow::Result<_>>()
         .ok()?;
     let p = fit_slow(data, &y0, slow_x, &set, u_range)?;
-    catalogue::with_slow(&m, &p, u_range)
+    catalogue::with_slow(m, &p, u_range)
 }
 
 /// Fit every candidate and simulate it on every record.

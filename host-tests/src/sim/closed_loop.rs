@@ -42,22 +42,6 @@ pub fn loop_stage(
     Stage::new(&c).map_err(|e| anyhow::anyhow!("the stage at the loop's rate: {e}"))
 }
 
-/// The input, volts at the amplifier, at which `stage`'s static output is `y_v` (bisection
-/// over `[lo_v, hi_v]`, 48 halvings: the static map is strictly increasing, see
-/// [`Stage::static_output`]). Outside the map's range, the nearer end.
-pub fn operating_input(stage: &Stage, y_v: f32, lo_v: f32, hi_v: f32) -> f32 {
-    let (mut lo, mut hi) = (lo_v, hi_v);
-    for _ in 0..48 {
-        let mid = 0.5 * (lo + hi);
-        if stage.static_output(mid) < y_v {
-            lo = mid;
-        } else {
-            hi = mid;
-        }
-    }
-    0.5 * (lo + hi)
-}
-
 /// `run` closed around `stage` at rest in `u0_v` (its output then is the reference
 /// `reference_v`, or the generator's start when `run` uses the generator): the controller is
 /// primed at `u0_v` in open loop, on an external reference, then `run` is swapped in and the
@@ -97,7 +81,7 @@ pub fn settled_stage(
 ) -> anyhow::Result<StageLoop> {
     let stage = loop_stage(cfg, run.lag.period_s, noise_v, seed)?;
     let (lo, hi) = (run.lag.min_v as f32, run.lag.max_v as f32);
-    let u0 = operating_input(&stage, reference_v, lo, hi);
+    let u0 = stage.static_input(reference_v, lo, hi);
     settled(run, FullStage::new(stage, u0), u0, reference_v)
         .with_context(|| format!("starting the loop at {reference_v} V"))
 }
