@@ -11,7 +11,7 @@
 use super::constants::{FAST_RATE_HZ, JUMP_MIN_V, JUMP_RATIO, MIN_SAMPLES, REVERSAL_MIN_V};
 use crate::io::csv::Record;
 use crate::io::model_file::ModelFile;
-use crate::sim::open_loop::simulate;
+use crate::sim::open_loop::simulate_after;
 use crate::util::median;
 use anyhow::{Context, bail, ensure};
 
@@ -176,7 +176,13 @@ pub fn sim(model: &ModelFile, d: &Data) -> anyhow::Result<Vec<f64>> {
     let mut m = model.clone();
     m.converters.noise_v = 0.0;
     let stage = m.build_stage()?;
-    Ok(simulate(&stage, m.period_s, &d.t_s, &d.u_v))
+    Ok(simulate_after(
+        &stage,
+        m.period_s,
+        &m.start_history_v(),
+        &d.t_s,
+        &d.u_v,
+    ))
 }
 
 /// Read the records named on the command line: CSV or MATLAB v5 `.mat` (with `vars`).

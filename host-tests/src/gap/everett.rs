@@ -97,12 +97,66 @@ pub const HYST_BAND_SMOOTH: f64 = 0.1;
 const INTERVALS: usize = GRID_NODES - 1;
 const _: () = assert!(INTERVALS % HYST_BANDS == 0);
 
-/// The table's input range for records whose inputs span `lo..hi` volts: that span, kept
-/// within the amplifier's input range and at least 1 V wide.
+/// Margin of the table's range beyond the records' inputs, volts (our assumption, measured on
+/// the single-sine records of issue #12: without it a 1 Hz sine over 0.5..9.5 V of a PI truth
+/// was fitted to 170 mV, with 0.5 V to 16 mV before any start memory). A relay whose lower
+/// threshold lies below the records' lowest input never switches off during them (a stage
+/// whose earlier motion went lower keeps it on), and one whose upper threshold lies above
+/// their highest input never switches on. A table that ends at the records' extremes clips
+/// those relays onto its edges, where every visit switches them: the loop gets a drop at its
+/// ends that the stage does not have. The margin gives them room; whether they are on at the
+/// start is the start memory's part ([`start_candidates`]).
+pub const HYST_RANGE_MARGIN_V: f64 = 0.5;
+
+/// The table's input range for records whose inputs span `lo..hi` volts: that span widened by
+/// [`HYST_RANGE_MARGIN_V`] each side, kept within the amplifier's input range and at least
+/// 1 V wide.
 pub fn hyst_range(lo: f64, hi: f64) -> (f64, f64) {
-    let lo = lo.clamp(params::AMP_INPUT_MIN_V, params::AMP_INPUT_MAX_V - 1.0);
-    let hi = hi.clamp(lo + 1.0, params::AMP_INPUT_MAX_V);
+    let lo =
+        (lo - HYST_RANGE_MARGIN_V).clamp(params::AMP_INPUT_MIN_V, params::AMP_INPUT_MAX_V - 1.0);
+    let hi = (hi + HYST_RANGE_MARGIN_V).clamp(lo + 1.0, params::AMP_INPUT_MAX_V);
     (lo, hi)
+}
+
+/// The start memories tried for records whose first input is `u0_v`, on a table over `range`
+/// (turning points after coming up from the bottom, as `[hysteresis] start_turns_v`): none
+/// (the major rising curve); came down from above (`[p]`, five heights); came down from the
+/// top to `v` and up again (`[hi, v]`, three depths); and a decaying oscillation around
+/// `u0` (`u0 +- A, u0 -+ 0.6 A, ...` down to 1 % of the span, three amplitudes, first
+/// excursion up or down: the state a stage is left in after a scan that died away, close to
+/// the Preisach plane's anti-diagonal). Our assumption: a lab record starts from rest after
+/// one of these; 15 candidates, each checked in one simulation of the fitted model.
+pub fn start_candidates(u0_v: f64, range: (f64, f64)) -> Vec<Vec<f64>> {
+    let (lo, hi) = range;
+    let u0 = u0_v.clamp(lo, hi);
+    let span = hi - lo;
+    let mut out: Vec<Vec<f64>> = vec![vec![]];
+    for f in [0.125, 0.25, 0.5, 0.75, 1.0] {
+        let p = u0 + (hi - u0) * f;
+        if p - u0 > 0.01 * span {
+            out.push(vec![p]);
+        }
+    }
+    for f in [0.25, 0.5, 0.75] {
+        let v = lo + (u0 - lo) * f;
+        if u0 - v > 0.01 * span && v - lo > 0.01 * span {
+            out.push(vec![hi, v]);
+        }
+    }
+    for a in [0.125, 0.25, 0.5] {
+        for sign in [1.0, -1.0] {
+            let mut amp = a * span;
+            let mut s = sign;
+            let mut h = Vec::new();
+            while amp > 0.01 * span && h.len() < crate::io::model_file::MAX_START_TURNS {
+                h.push((u0 + s * amp).clamp(lo, hi));
+                amp *= 0.6;
+                s = -s;
+            }
+            out.push(h);
+        }
+    }
+    out
 }
 
 /// Node `i` of the grid over `range`, volts.
@@ -162,7 +216,8 @@ pub fn radius_used(range: (f64, f64), i: usize) -> bool {
 
 /// The loop-only columns at `rows` of a record with inputs `u_v`: for each (radius, band)
 /// the table's response minus the band's reversible part (zero for radii not used).
-pub fn columns(u_v: &[f64], rows: &[usize], range: (f64, f64)) -> Vec<Vec<f64>> {
+pub fn columns(u_v: &[f64], rows: &[usize], range: (f64, f64), start_v: &[f64]) -> Vec<Vec<f64>> {
+    let start: Vec<f32> = start_v.iter().map(|&v| v as f32).collect();
     let mut out = vec![vec![0.0; rows.len()]; HYST_COLS];
     for (i, r) in PLAY_GRID_V.iter().enumerate() {
         if !radius_used(range, i) {
@@ -175,7 +230,7 @@ pub fn columns(u_v: &[f64], rows: &[usize], range: (f64, f64)) -> Vec<Vec<f64>> 
                 continue;
             };
             let mut mem = HysteresisMemory::new();
-            mem.reset(&t, u_v[0] as f32);
+            mem.reset_after(&t, &start, u_v[0] as f32);
             let c = &mut out[col(i, k)];
             // (the reversible columns are filled below)
             let mut next = 0usize;
@@ -230,6 +285,8 @@ pub struct HystFit {
     pub range: (f64, f64),
     /// Weight of each (radius, band) column, sensor volts per volt.
     pub weights: Vec<f64>,
+    /// The start memory the columns were computed with (`[hysteresis] start_turns_v`).
+    pub start_v: Vec<f64>,
 }
 
 impl HystFit {
@@ -258,6 +315,7 @@ impl HystFit {
             dc_gain: None,
             loop_width_frac: None,
             everett_v: Some(e),
+            start_turns_v: (!self.start_v.is_empty()).then(|| self.start_v.clone()),
         }
     }
 }
@@ -285,12 +343,19 @@ pub fn summary(h: &HysteresisSection) -> Vec<(String, f64)> {
             .fold(0.0f64, f64::max)
     };
     let half = GRID_NODES / 2;
-    vec![
+    let mut out = vec![
         ("range_lo_v".into(), lo as f64),
         ("range_hi_v".into(), hi as f64),
         ("loop_width_low_v".into(), width(0..half)),
         ("loop_width_high_v".into(), width(half..GRID_NODES)),
-    ]
+    ];
+    // The start memory, when it is not the major rising curve: how many turning points and
+    // the first (highest reach) of them.
+    if let Some(turns) = h.start_turns_v.as_ref().filter(|t| !t.is_empty()) {
+        out.push(("start_turns".into(), turns.len() as f64));
+        out.push(("start_first_turn_v".into(), turns[0]));
+    }
+    out
 }
 
 #[cfg(test)]
@@ -311,7 +376,7 @@ mod tests {
             })
             .collect();
         let rows: Vec<usize> = (0..n).step_by(7).collect();
-        let cols = columns(&u, &rows, range);
+        let cols = columns(&u, &rows, range, &[]);
         let mut weights = vec![0.0; HYST_COLS];
         // An asymmetric density: wide operators at the top, narrow ones at the bottom.
         weights[col(2, 0)] = 0.3;
@@ -324,6 +389,7 @@ mod tests {
         let fit = HystFit {
             range,
             weights: weights.clone(),
+            start_v: vec![],
         };
         let t = fit.section(g).table().expect("a valid table");
         let mut mem = HysteresisMemory::new();
@@ -347,6 +413,7 @@ mod tests {
         let fit = HystFit {
             range: (0.0, 10.0),
             weights: vec![0.0; HYST_COLS],
+            start_v: vec![],
         };
         let t = fit.section(0.79).table().unwrap();
         let mut mem = HysteresisMemory::new();

@@ -58,6 +58,7 @@ pub mod report;
 pub mod select;
 pub mod signatures;
 pub mod slow_fit;
+pub mod start;
 pub mod unexplained;
 
 pub use constants::*;

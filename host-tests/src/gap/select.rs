@@ -13,6 +13,7 @@ use super::fast_fit::fit_fast;
 use super::polish::refine_play_radii;
 use super::signatures;
 use super::slow_fit::{SlowRegressors, fit_slow, slow_regressors};
+use super::start;
 use super::unexplained::{Unexplained, locate};
 use crate::io::model_file::ModelFile;
 use crate::util::par_map;
@@ -160,7 +161,7 @@ pub fn diagnose(base: &ModelFile, data: &[Data], opts: &Options) -> anyhow::Resu
         .map(|(d, s)| mse(&d.y_v, s))
         .collect();
     let base_sigs = signatures::compute(data, &sims, &noise);
-    let slow_x = slow_regressors(data);
+    let mut slow_x = slow_regressors(data, &[]);
     let mut steps: Vec<Step> = Vec::new();
     let mut named: Vec<String> = Vec::new();
     let mut tried = Vec::new();
@@ -280,6 +281,26 @@ pub fn diagnose(base: &ModelFile, data: &[Data], opts: &Options) -> anyhow::Resu
         model = best.model;
         sims = best.sims;
         cur_mse = best.mse;
+        // A new or refitted hysteresis table: the start memory that suits it, the slow
+        // effects refitted from it (folded into this step: it is the table's own state).
+        if steps.last().is_some_and(|s| s.effect == "hysteresis")
+            && !at_floor_now(&cur_mse, &var)
+            && let Some(f) = start::search(&model, data, &slow_x, u_range, &cur_mse)
+        {
+            slow_x = f.slow_x;
+            model = f.model;
+            sims = f.sims;
+            cur_mse = f.mse;
+            if let Some(s) = steps.last_mut() {
+                s.rms_after_v = (cur_mse.iter().sum::<f64>() / cur_mse.len() as f64).sqrt();
+                s.record_rms_after_v = cur_mse.iter().map(|m| m.sqrt()).collect();
+                s.sims = sims.clone();
+                s.params.clear();
+                for (k, v) in catalogue::params_of(&model, "hysteresis") {
+                    s.params.insert(k, serde_json::json!(v));
+                }
+            }
+        }
     }
     // Final check: take each named effect back out (refitting the slow ones left) and keep it
     // only if the residual above the noise floor grows by PRUNE_RATIO at least.

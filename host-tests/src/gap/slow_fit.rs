@@ -35,6 +35,20 @@ pub struct SlowRegressors {
     hyst: std::sync::Arc<Vec<Vec<Vec<f64>>>>,
     /// The hysteresis table's input range.
     range: (f64, f64),
+    /// The hysteresis start memory the basis was computed with.
+    start_v: Vec<f64>,
+}
+
+impl SlowRegressors {
+    /// The hysteresis table's input range.
+    pub fn range(&self) -> (f64, f64) {
+        self.range
+    }
+
+    /// The hysteresis start memory of the basis.
+    pub fn start_v(&self) -> &[f64] {
+        &self.start_v
+    }
 }
 
 /// Rows of one record the slow solve uses at most (our assumption: the slow effects change
@@ -111,7 +125,9 @@ fn fixed_cols(set: &[&str]) -> Vec<usize> {
     fixed
 }
 
-pub(super) fn slow_regressors(data: &[Data]) -> SlowRegressors {
+/// The regressors of `data`, the hysteresis basis starting every record from the memory
+/// `start_v` (turning points, [`everett::start_candidates`]).
+pub(super) fn slow_regressors(data: &[Data], start_v: &[f64]) -> SlowRegressors {
     let rows: Vec<Vec<usize>> = data.iter().map(solve_rows).collect();
     let (lo, hi) = data
         .iter()
@@ -121,7 +137,7 @@ pub(super) fn slow_regressors(data: &[Data]) -> SlowRegressors {
         });
     let range = everett::hyst_range(lo, hi);
     let hyst = crate::util::par_map(&data.iter().zip(&rows).collect::<Vec<_>>(), |(d, r)| {
-        everett::columns(&d.u_v, r, range)
+        everett::columns(&d.u_v, r, range, start_v)
     });
     let base = SlowRegressors {
         cols: Vec::new(),
@@ -129,6 +145,7 @@ pub(super) fn slow_regressors(data: &[Data]) -> SlowRegressors {
         drive: Vec::new(),
         hyst: std::sync::Arc::new(hyst),
         range,
+        start_v: start_v.to_vec(),
     };
     slow_regressors_shaped(data, &Shape::default(), &base)
 }
@@ -201,6 +218,7 @@ fn slow_regressors_shaped(data: &[Data], shape: &Shape, base: &SlowRegressors) -
         drive: drives,
         hyst: base.hyst.clone(),
         range: base.range,
+        start_v: base.start_v.clone(),
     }
 }
 
@@ -434,6 +452,7 @@ fn fit_slow_linear(
                 )
             }),
             hysteresis: set.contains(&"hysteresis").then(|| HystFit {
+                start_v: x.start_v.clone(),
                 range: x.range,
                 weights: (0..HYST_COLS).map(|i| get(COL_HYST + i)).collect(),
             }),
