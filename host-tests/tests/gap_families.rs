@@ -340,6 +340,12 @@ impl Tally {
 const TALLY_HEADER: &str =
     "                         cases   exact  false / given          missed  clean named  s/case";
 
+/// Issue #12's requirements on 100 drawn cases: >= 95 % exact named sets, <= 1 % false names
+/// (of the names given), no name on a clean record. Measured on the workflow of ccaf5d5
+/// (release, 2 cores, ~8 min): 75 % exact, 27 of 130 names false (20.8 %), 0 of 15 clean cases
+/// named; identification 95.5 %, long sine 60.7 %, sweep 70.8 %, random levels 76.9 %. Most
+/// failures are a non-play hysteresis on a sine or a chirp that the play sum leaves 10-50x above
+/// the floor, the rest taken by whichever slow effect correlates best.
 #[test]
 #[ignore = "issue #12: workflow does not yet meet this on all families"]
 fn randomised_families_are_named() {
