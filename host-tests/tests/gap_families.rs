@@ -1,0 +1,556 @@
+//! The randomised model-gap suite of issue #12, item 6: the workflow on protocols and truths it
+//! was not shaped for.
+//!
+//! Each case draws (from `StdRng::seed_from_u64(1000 + i)`, so `GAP_SEED=N` re-runs case N) a
+//! protocol family (`families::Family`: the identification protocol, one long sine, a chirp, or
+//! random levels, at 1-50 kHz), then a kind (clean, one effect, or a pair) among the effects that
+//! protocol can show (the rule is in `families`), then a truth for each effect in a form the
+//! workflow does not fit:
+//! * `hysteresis`: Bouc-Wen, Duhem (Coleman-Hodgdon), a Preisach plane with a Gaussian or
+//!   Lorentzian density (asymmetric), or Prandtl-Ishlinskii with random radii; loop 5-15 % of
+//!   the span; half the cases start after earlier excursions (not on a major curve);
+//! * `drift`: log creep or fractional (power-law `t^a`, a = 0.05-0.3) creep, 2-8 % of a step
+//!   at 10 s;
+//! * `nonlinear-gain`: a static map of tanh, exp or softplus shape (not a polynomial), with the
+//!   catalogue's convention `m(0) = 0`, `m'(0) = 1`, deviating 40-200 mV (input) at most;
+//! * `sensor-gain`: scale 0.95-1.05 (at least 0.5 % off), `offset`: 5-30 mV either sign (the
+//!   model file's `[converters] sensor_gain` and `[offset]`);
+//! * `time-delay` 150-400 us, `slew-rate-limit` 2e4-2e5 V/s at the amplifier output,
+//!   `resonance` 3-12 kHz (damping 0.02-0.08): the model file's own blocks.
+//!
+//! The hysteresis, creep and static map are applied to the input (in that order, creep on the
+//! raw input) before the truth's `thesis-linear` stage; every record has 1 mV of sensor noise.
+//! The workflow starts from `thesis-linear` and is told nothing else. A case is exact when the
+//! named set equals the truth's set of catalogue names. `GAP_DEBUG=1` prints each case's table.
+
+mod families;
+
+use families::{Creep, Family, Hysteresis, Protocol, StaticMap, draw_protocol, lu};
+use host_tests::gap::{self, Data, Options, diagnose};
+use host_tests::io::csv::Record;
+use host_tests::io::model_file::{
+    DelaySection, ModelFile, OffsetSection, ResonanceSection, SlewSection,
+};
+use host_tests::sim::open_loop::simulate;
+use rand::rngs::StdRng;
+use rand::{Rng, SeedableRng};
+use std::collections::BTreeMap;
+
+/// A drawn case: the protocol and the truth.
+#[derive(Debug)]
+struct Case {
+    seed: u64,
+    protocol: Protocol,
+    /// The truth's effects, catalogue names, sorted.
+    effects: Vec<&'static str>,
+    hysteresis: Option<Hysteresis>,
+    creep: Option<Creep>,
+    static_map: Option<StaticMap>,
+    sensor_gain: Option<f64>,
+    offset_v: Option<f64>,
+    delay_s: Option<f64>,
+    slew_v_per_s: Option<f64>,
+    mode: Option<(f64, f64)>,
+}
+
+impl Case {
+    fn draw(seed: u64) -> Self {
+        let mut rng = StdRng::seed_from_u64(seed);
+        let family = Family::ALL[rng.gen_range(0..Family::ALL.len())];
+        let protocol = draw_protocol(family, &mut rng);
+        let allowed = protocol.allowed();
+        // Kinds: 15 % clean, 45 % one effect, 40 % a pair.
+        let r: f64 = rng.r#gen();
+        let mut effects: Vec<&'static str> = Vec::new();
+        let count = if r < 0.15 {
+            0
+        } else if r < 0.6 {
+            1
+        } else {
+            2
+        };
+        while effects.len() < count {
+            let e = allowed[rng.gen_range(0..allowed.len())];
+            if !effects.contains(&e) {
+                effects.push(e);
+            }
+        }
+        effects.sort();
+        let has = |e: &str| effects.contains(&e);
+        let hysteresis = has("hysteresis").then(|| Hysteresis::draw(&mut rng));
+        let creep = has("drift").then(|| Creep::draw(&mut rng));
+        let static_map = has("nonlinear-gain").then(|| StaticMap::draw(&mut rng));
+        let sensor_gain = has("sensor-gain").then(|| {
+            let s = if rng.gen_bool(0.5) { 1.0 } else { -1.0 };
+            1.0 + s * rng.gen_range(0.005..0.05)
+        });
+        let offset_v = has("offset").then(|| {
+            let s = if rng.gen_bool(0.5) { 1.0 } else { -1.0 };
+            s * rng.gen_range(0.005..0.03)
+        });
+        let delay_s = has("time-delay").then(|| lu(&mut rng, 150e-6, 400e-6));
+        let slew_v_per_s = has("slew-rate-limit").then(|| lu(&mut rng, 2e4, 2e5));
+        let mode = has("resonance").then(|| {
+            let top = 12_000.0f64.min(protocol.step_rate_hz.unwrap_or(0.0) / 4.0);
+            (lu(&mut rng, 3000.0, top), lu(&mut rng, 0.02, 0.08))
+        });
+        Self {
+            seed,
+            protocol,
+            effects,
+            hysteresis,
+            creep,
+            static_map,
+            sensor_gain,
+            offset_v,
+            delay_s,
+            slew_v_per_s,
+            mode,
+        }
+    }
+
+    /// The truth forms, for the per-form table.
+    fn forms(&self) -> Vec<&'static str> {
+        let mut v = Vec::new();
+        if let Some(h) = &self.hysteresis {
+            v.push(h.form.label());
+            v.push(if h.before.is_empty() {
+                "hyst-start:rest"
+            } else {
+                "hyst-start:excursion"
+            });
+        }
+        if let Some(c) = &self.creep {
+            v.push(c.label());
+        }
+        if let Some(m) = &self.static_map {
+            v.push(m.label());
+        }
+        v
+    }
+
+    /// One line on the truth's parameters (the Everett table is left out).
+    fn describe(&self) -> String {
+        let mut s = format!("{} [{}]", self.protocol.family.name(), self.protocol.desc);
+        if let Some(h) = &self.hysteresis {
+            s += &format!(
+                "; {:?} loop {:.1} % start {:?}",
+                h.form,
+                100.0 * h.share,
+                h.before
+            );
+        }
+        if let Some(c) = &self.creep {
+            s += &format!("; {c:?}");
+        }
+        if let Some(m) = &self.static_map {
+            s += &format!("; {:?} {:.0} mV", m.shape, 1e3 * m.amp_v);
+        }
+        if let Some(g) = self.sensor_gain {
+            s += &format!("; sensor gain {g:.4}");
+        }
+        if let Some(o) = self.offset_v {
+            s += &format!("; offset {:.1} mV", 1e3 * o);
+        }
+        if let Some(d) = self.delay_s {
+            s += &format!("; delay {:.0} us", 1e6 * d);
+        }
+        if let Some(v) = self.slew_v_per_s {
+            s += &format!("; slew {v:.3e} V/s");
+        }
+        if let Some((f, z)) = self.mode {
+            s += &format!("; mode {f:.0} Hz zeta {z:.3}");
+        }
+        s
+    }
+
+    /// The truth's linear stage: `thesis-linear` with 1 mV noise and the model-file effects.
+    fn model(&self) -> ModelFile {
+        let mut m = ModelFile::built_in("thesis-linear").expect("built-in");
+        m.converters.noise_v = 1e-3;
+        if let Some(g) = self.sensor_gain {
+            m.converters.sensor_gain = g;
+        }
+        if let Some(offset_v) = self.offset_v {
+            m.offset = Some(OffsetSection { offset_v });
+        }
+        if let Some(delay_s) = self.delay_s {
+            m.time_delay = Some(DelaySection { delay_s });
+        }
+        if let Some(output_v_per_s) = self.slew_v_per_s {
+            m.slew_rate_limit = Some(SlewSection { output_v_per_s });
+        }
+        if let Some((mode_hz, damping)) = self.mode {
+            m.resonance = Some(ResonanceSection { mode_hz, damping });
+        }
+        m
+    }
+
+    /// The input the truth's linear stage sees: hysteresis, then the static map, plus creep.
+    fn predistort(&self, t_s: &[f64], u: &[f64]) -> Vec<f64> {
+        let mut v = u.to_vec();
+        if let Some(h) = &self.hysteresis {
+            for (vi, hi) in v.iter_mut().zip(h.apply(u)) {
+                *vi += hi;
+            }
+        }
+        if let Some(m) = &self.static_map {
+            for vi in v.iter_mut() {
+                *vi = m.map(*vi);
+            }
+        }
+        if let Some(c) = &self.creep {
+            for (vi, ci) in v.iter_mut().zip(c.apply(t_s, u)) {
+                *vi += ci;
+            }
+        }
+        v
+    }
+
+    /// The records, each with its own noise seed.
+    fn records(&self) -> Vec<Data> {
+        let m = self.model();
+        self.protocol
+            .records
+            .iter()
+            .enumerate()
+            .map(|(i, r)| {
+                let mut mi = m.clone();
+                mi.converters.seed = self.seed * 2 + i as u64;
+                let stage = mi.build_stage().expect("truth model");
+                let y = simulate(
+                    &stage,
+                    mi.period_s,
+                    &r.t_s,
+                    &self.predistort(&r.t_s, &r.u_v),
+                );
+                let rec = Record::new(r.t_s.clone(), r.u_v.clone(), Some(y), None).expect("record");
+                Data::from_record(&r.name, rec).expect("record loads")
+            })
+            .collect()
+    }
+}
+
+struct Outcome {
+    family: Family,
+    truth: Vec<String>,
+    forms: Vec<&'static str>,
+    named: Vec<String>,
+    final_over_floor: f64,
+    describe: String,
+    seconds: f64,
+}
+
+fn run_case(seed: u64) -> Outcome {
+    let started = std::time::Instant::now();
+    let case = Case::draw(seed);
+    let data = case.records();
+    let base = ModelFile::built_in("thesis-linear").unwrap();
+    let d = diagnose(&base, &data, &Options::default()).expect("diagnosis");
+    if std::env::var("GAP_DEBUG").is_ok() {
+        println!(
+            "seed {seed} truth {:?}: {}\n{}",
+            case.effects,
+            case.describe(),
+            d.table()
+        );
+        for (i, t) in d.tried.iter().enumerate() {
+            println!("  tried at step {}: {t:?}", i + 1);
+        }
+        for s in &d.steps {
+            println!(
+                "  {}{} per record mV: {:.2?} -> {:.2?}",
+                s.effect,
+                if s.removed { " (removed)" } else { "" },
+                s.record_rms_before_v
+                    .iter()
+                    .map(|v| v * 1e3)
+                    .collect::<Vec<_>>(),
+                s.record_rms_after_v
+                    .iter()
+                    .map(|v| v * 1e3)
+                    .collect::<Vec<_>>()
+            );
+        }
+    }
+    let mut named = d.named.clone();
+    named.sort();
+    Outcome {
+        family: case.protocol.family,
+        truth: case.effects.iter().map(|s| s.to_string()).collect(),
+        forms: case.forms(),
+        named,
+        final_over_floor: d.final_rms_v / d.noise_floor_v,
+        describe: case.describe(),
+        seconds: started.elapsed().as_secs_f64(),
+    }
+}
+
+/// Tallies of one group of cases (a family, a form, or all).
+#[derive(Default)]
+struct Tally {
+    cases: usize,
+    exact: usize,
+    names_given: usize,
+    false_names: usize,
+    missed: usize,
+    clean: usize,
+    clean_named: usize,
+    seconds: f64,
+}
+
+impl Tally {
+    fn add(&mut self, o: &Outcome) {
+        self.cases += 1;
+        self.seconds += o.seconds;
+        self.exact += (o.truth == o.named) as usize;
+        self.names_given += o.named.len();
+        self.false_names += o.named.iter().filter(|n| !o.truth.contains(n)).count();
+        self.missed += o.truth.iter().filter(|t| !o.named.contains(t)).count();
+        if o.truth.is_empty() {
+            self.clean += 1;
+            self.clean_named += (!o.named.is_empty()) as usize;
+        }
+    }
+
+    fn exact_pct(&self) -> f64 {
+        100.0 * self.exact as f64 / self.cases.max(1) as f64
+    }
+
+    fn false_pct(&self) -> f64 {
+        100.0 * self.false_names as f64 / self.names_given.max(1) as f64
+    }
+
+    fn line(&self, label: &str) -> String {
+        format!(
+            "{label:<24}{:>6}{:>8.1} %{:>6} /{:>4} ={:>6.1} %{:>8}{:>6} /{:>3}{:>9.1}",
+            self.cases,
+            self.exact_pct(),
+            self.false_names,
+            self.names_given,
+            self.false_pct(),
+            self.missed,
+            self.clean_named,
+            self.clean,
+            self.seconds / self.cases.max(1) as f64
+        )
+    }
+}
+
+const TALLY_HEADER: &str =
+    "                         cases   exact  false / given          missed  clean named  s/case";
+
+/// Issue #12's requirements on 100 drawn cases: >= 95 % exact named sets, <= 1 % false names
+/// (of the names given), no name on a clean record. Measured on the workflow of ccaf5d5
+/// (release, 2 cores, ~8 min): 75 % exact, 27 of 130 names false (20.8 %), 0 of 15 clean cases
+/// named; identification 95.5 %, long sine 60.7 %, sweep 70.8 %, random levels 76.9 %. Most
+/// failures are a non-play hysteresis on a sine or a chirp that the play sum leaves 10-50x above
+/// the floor, the rest taken by whichever slow effect correlates best.
+#[test]
+#[ignore = "issue #12: workflow does not yet meet this on all families"]
+fn randomised_families_are_named() {
+    // Release (the README's test command): 100 cases, seeds 1000..1099 (`GAP_CASES` changes
+    // the count, `GAP_SEED=N` runs case N alone). Debug builds run 6.
+    let release = !cfg!(debug_assertions);
+    let n_cases: u64 = std::env::var("GAP_CASES")
+        .ok()
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(if release { 100 } else { 6 });
+    let only: Option<u64> = std::env::var("GAP_SEED").ok().and_then(|s| s.parse().ok());
+    let seeds: Vec<u64> = match only {
+        Some(s) => vec![s],
+        None => (1000..1000 + n_cases).collect(),
+    };
+    let started = std::time::Instant::now();
+    let outcomes = host_tests::util::par_map(&seeds, |s| run_case(*s));
+    let elapsed_s = started.elapsed().as_secs_f64();
+
+    // Confusion table: rows are the hidden effects (and "clean"), columns the names given.
+    let mut cols: Vec<&str> = gap::catalogue::EFFECTS.to_vec();
+    cols.push("(none)");
+    let mut table: BTreeMap<String, BTreeMap<String, usize>> = BTreeMap::new();
+    let mut all = Tally::default();
+    let mut by_family: BTreeMap<Family, Tally> = BTreeMap::new();
+    let mut by_form: BTreeMap<&str, Tally> = BTreeMap::new();
+    let mut by_effect: BTreeMap<String, Tally> = BTreeMap::new();
+    for (o, seed) in outcomes.iter().zip(&seeds) {
+        all.add(o);
+        by_family.entry(o.family).or_default().add(o);
+        for f in &o.forms {
+            by_form.entry(f).or_default().add(o);
+        }
+        if o.truth != o.named {
+            println!(
+                "FAIL seed {seed} truth {:?}: named {:?} (final {:.2}x floor, {:.1} s) {}",
+                o.truth, o.named, o.final_over_floor, o.seconds, o.describe
+            );
+        }
+        let rows = if o.truth.is_empty() {
+            vec!["clean".to_string()]
+        } else {
+            o.truth.clone()
+        };
+        for r in rows {
+            by_effect.entry(r.clone()).or_default().add(o);
+            let row = table.entry(r).or_default();
+            if o.named.is_empty() {
+                *row.entry("(none)".into()).or_default() += 1;
+            }
+            for x in &o.named {
+                *row.entry(x.clone()).or_default() += 1;
+            }
+        }
+    }
+    println!(
+        "\nConfusion table ({} cases; rows: hidden effect, columns: effects named)",
+        outcomes.len()
+    );
+    print!("{:<16}{:>6}", "", "cases");
+    for c in &cols {
+        print!("{:>9}", &c[..c.len().min(8)]);
+    }
+    println!();
+    for (r, row) in &table {
+        print!("{r:<16}{:>6}", by_effect[r].cases);
+        for c in &cols {
+            print!("{:>9}", row.get(*c).copied().unwrap_or(0));
+        }
+        println!();
+    }
+    println!("\n{TALLY_HEADER}");
+    for (f, t) in &by_family {
+        println!("{}", t.line(f.name()));
+    }
+    println!("{}", all.line("all"));
+    println!("\nby hidden effect\n{TALLY_HEADER}");
+    for (e, t) in &by_effect {
+        println!("{}", t.line(e));
+    }
+    println!("\nby truth form\n{TALLY_HEADER}");
+    for (f, t) in &by_form {
+        println!("{}", t.line(f));
+    }
+    let mut ratios: Vec<f64> = outcomes.iter().map(|o| o.final_over_floor).collect();
+    ratios.sort_by(f64::total_cmp);
+    println!(
+        "\nfinal residual / floor: median {:.2}, worst {:.2}; {} cases in {elapsed_s:.1} s",
+        ratios[ratios.len() / 2],
+        ratios[ratios.len() - 1],
+        outcomes.len()
+    );
+    println!(
+        "named set exactly right: {}/{} = {:.1} %; false names: {} of {} given ({:.1} %); clean records named: {}/{}",
+        all.exact,
+        all.cases,
+        all.exact_pct(),
+        all.false_names,
+        all.names_given,
+        all.false_pct(),
+        all.clean_named,
+        all.clean
+    );
+    if only.is_some() {
+        return;
+    }
+    // Issue #12's requirements, as stated.
+    assert_eq!(all.clean_named, 0, "clean records must get no name");
+    if release {
+        assert!(all.cases >= 100, "{} cases, at least 100", all.cases);
+        assert!(
+            all.exact_pct() >= 95.0,
+            "exact {:.1} % below 95 %",
+            all.exact_pct()
+        );
+        assert!(
+            all.false_pct() <= 1.0,
+            "false names {:.1} % above 1 %",
+            all.false_pct()
+        );
+    }
+}
+
+/// The truth forms do what the module notes say: every loop counter-clockwise and as wide as
+/// drawn; the Preisach plane and the play operators keep return-point memory and wipe out
+/// (Bouc-Wen and Duhem need not); the creep banks follow their laws within 2 % from 10 ms to
+/// 30 s; the static maps keep `m(0) = 0`, `m'(0) = 1` and deviate `amp` at most.
+#[test]
+fn truth_forms_follow_their_laws() {
+    let grid: Vec<f64> = (0..=500).map(|i| i as f64 * 0.02).collect();
+    let mut worst_width = 0.0f64;
+    for seed in 0..40u64 {
+        let mut rng = StdRng::seed_from_u64(seed);
+        let h = Hysteresis::draw(&mut rng);
+        let mut path = vec![0.0, 10.0, 0.0];
+        path.extend(&grid);
+        path.extend(grid.iter().rev());
+        let y = Hysteresis {
+            before: Vec::new(),
+            ..h
+        };
+        let out = y.apply(&path);
+        assert!(out.iter().all(|v| v.is_finite()), "{:?}", y.form);
+        let up = &out[3..3 + grid.len()];
+        let down: Vec<f64> = out[3 + grid.len()..].iter().rev().copied().collect();
+        let gaps: Vec<f64> = up.iter().zip(&down).map(|(a, b)| b - a).collect();
+        let width = gaps.iter().copied().fold(0.0f64, f64::max);
+        let crossing = gaps.iter().copied().fold(0.0f64, f64::min);
+        // Bouc-Wen's branches may cross by a hair next to the reversal points.
+        assert!(
+            crossing >= -0.01 * width,
+            "{:?}: rising above falling by {crossing}",
+            y.form
+        );
+        worst_width = worst_width.max((width / (10.0 * y.share) - 1.0).abs());
+        if matches!(
+            y.form,
+            families::HystForm::Preisach { .. } | families::HystForm::Pi { .. }
+        ) {
+            let a = y.apply(&[2.0, 8.0, 4.0, 6.0, 4.0, 9.0]);
+            let b = y.apply(&[2.0, 9.0]);
+            assert!(
+                (a[2] - a[4]).abs() < 1e-9,
+                "{}: return point",
+                y.form.label()
+            );
+            assert!((a[5] - b[1]).abs() < 1e-9, "{}: wiping out", y.form.label());
+        }
+    }
+    println!(
+        "loop widths within {:.2} % of the drawn ones",
+        100.0 * worst_width
+    );
+    assert!(worst_width < 1e-6);
+    let t: Vec<f64> = (0..30_000).map(|i| i as f64 * 1e-3).collect();
+    let mut u = vec![1.0; t.len()];
+    u[0] = 0.0;
+    for seed in 0..10u64 {
+        let mut rng = StdRng::seed_from_u64(seed);
+        let c = Creep::draw(&mut rng);
+        let out = c.apply(&t, &u);
+        let law = |s: f64| match c {
+            Creep::Log { gamma, tau0_s } => gamma * (1.0 + s / tau0_s).ln(),
+            Creep::Power { a, tau0_s, share } => {
+                share * ((s + tau0_s).powf(a) - tau0_s.powf(a))
+                    / ((10.0 + tau0_s).powf(a) - tau0_s.powf(a))
+            }
+        };
+        for i in [11usize, 101, 1001, 10_001, 29_999] {
+            // Sample i holds the bank's state after i - 1 steps of the held unit input.
+            let got = out[i] * model_core::params::PLANT_GAIN;
+            let want = law(t[i - 1]);
+            assert!(
+                (got / want - 1.0).abs() < 0.02,
+                "{c:?} at {} s: {got} against {want}",
+                t[i - 1]
+            );
+        }
+        let m = StaticMap::draw(&mut rng);
+        assert!(m.map(0.0).abs() < 1e-12);
+        assert!(((m.map(1e-4) - m.map(-1e-4)) / 2e-4 - 1.0).abs() < 1e-4);
+        let dev = grid
+            .iter()
+            .map(|&v| (m.map(v) - v).abs())
+            .fold(0.0f64, f64::max);
+        assert!((dev / m.amp_v.abs() - 1.0).abs() < 1e-3, "{m:?}");
+    }
+}
