@@ -72,3 +72,13 @@ pub const DRIFT_TAU_MAX_RECORDS: f64 = 2.0;
 /// gap between two bin means of 20 samples or more stays near one noise sigma; three is a
 /// loop, not noise; a sensor-gain error with 1 mV of noise shows 0.5 mV, a real loop hundreds).
 pub const HYST_LOOP_MIN_NOISE: f64 = 3.0;
+
+/// Shortest run of constant input that counts as a hold, seconds (our assumption: long enough
+/// for a drift tail of 10-100 ms lags to show after the step's transient).
+pub const HOLD_MIN_S: f64 = 0.2;
+
+/// Records without holds cannot tell a drift from a hysteresis loop at low frequency when the
+/// other effect, fitted in the named one's place, leaves every record's residual within this
+/// factor of the named one's (RMS; our assumption: a quarter more is within what a misfit of
+/// form costs either effect on records nobody shaped).
+pub const CANNOT_TELL_RATIO: f64 = 1.25;

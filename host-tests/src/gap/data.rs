@@ -112,6 +112,24 @@ impl Data {
         count
     }
 
+    /// Does the record hold its input constant for [`super::constants::HOLD_MIN_S`] at least
+    /// somewhere (where a drift shows as a tail and a hysteresis loop does not)?
+    pub fn has_hold(&self) -> bool {
+        let min = (super::constants::HOLD_MIN_S / self.period_s()).ceil() as usize;
+        let mut run = 1usize;
+        for w in self.u_v.windows(2) {
+            if (w[1] - w[0]).abs() <= 1e-9 {
+                run += 1;
+                if run >= min {
+                    return true;
+                }
+            } else {
+                run = 1;
+            }
+        }
+        false
+    }
+
     /// Never empty (checked on construction).
     pub fn is_empty(&self) -> bool {
         self.t_s.is_empty()

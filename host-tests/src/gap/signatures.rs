@@ -108,7 +108,7 @@ pub fn compute(data: &[Data], sims: &[Vec<f64>], noise: &[f64]) -> Signatures {
                 s.peak_hz = strongest_line_hz(&s.welch);
             }
         }
-        // Holds: runs of constant input of at least 0.2 s.
+        // Holds: runs of constant input of at least HOLD_MIN_S.
         let mut i = 1;
         while i < n {
             let start = i;
@@ -116,7 +116,7 @@ pub fn compute(data: &[Data], sims: &[Vec<f64>], noise: &[f64]) -> Signatures {
                 i += 1;
             }
             let len = i - start;
-            if len as f64 * t >= 0.2 {
+            if len as f64 * t >= super::constants::HOLD_MIN_S {
                 let skip = ((0.02 / t).ceil() as usize).min(len / 4);
                 let w = ((len - skip) / 10).max(1);
                 let a = mean(&r[start + skip..start + skip + w]);

@@ -14,7 +14,7 @@ use super::constants::{
     DRIFT_REFINE_PASSES, DRIFT_REFINE_TOL_V2, DRIFT_TAU_MAX_RECORDS, SETTLE_S, STRUCTURE_ROUNDS,
 };
 use super::data::Data;
-use super::everett::{self, HYST_COLS, HystFit};
+use super::everett::{self, HYST_COLS, HYST_FIT_COLS, HystFit};
 use super::nnls::{nnls_normal, ridge};
 use crate::util::golden_n;
 use model_core::params;
@@ -111,7 +111,7 @@ fn col(x: &SlowRegressors, y0: &[Vec<f64>], r: usize, c: usize, j: usize) -> f64
 fn fixed_cols(set: &[&str]) -> Vec<usize> {
     let mut fixed: Vec<usize> = Vec::new();
     if set.contains(&"hysteresis") {
-        fixed.extend(COL_HYST..COL_HYST + HYST_COLS);
+        fixed.extend(COL_HYST..COL_HYST + HYST_FIT_COLS);
     }
     if set.contains(&"nonlinear-gain") {
         fixed.extend([COL_GAIN, COL_GAIN + 1]);
@@ -291,7 +291,7 @@ fn fit_drift_poly(
     let xs = slow_regressors_shaped(data, &plain, x);
     let mut fixed: Vec<usize> = Vec::new();
     if p.hysteresis.is_some() {
-        fixed.extend(COL_HYST..COL_HYST + HYST_COLS);
+        fixed.extend(COL_HYST..COL_HYST + HYST_FIT_COLS);
     }
     if p.gain.is_some() {
         fixed.extend([COL_GAIN, COL_GAIN + 1]);
