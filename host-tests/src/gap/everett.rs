@@ -113,7 +113,7 @@ pub const HYST_BAND_SMOOTH: f64 = 0.1;
 
 /// Grid intervals of the table.
 const INTERVALS: usize = GRID_NODES - 1;
-const _: () = assert!(INTERVALS % HYST_BANDS == 0);
+const _: () = assert!(INTERVALS.is_multiple_of(HYST_BANDS));
 
 /// Margin of the table's range beyond the records' inputs, volts (our assumption, measured on
 /// the single-sine records of issue #12: without it a 1 Hz sine over 0.5..9.5 V of a PI truth

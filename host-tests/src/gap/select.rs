@@ -6,7 +6,8 @@
 
 use super::catalogue::{self, EFFECTS, FAST, SLOW};
 use super::constants::{
-    CANNOT_TELL_RATIO, HOLD_MIN_S, MAX_STEPS, MIN_EXPLAINED, PRUNE_KEEP_EXCESS_VAR, PRUNE_PER_PARAM, PRUNE_RATIO, STOP_FLOOR_RATIO,
+    CANNOT_TELL_RATIO, HOLD_MIN_S, MAX_STEPS, MIN_EXPLAINED, PRUNE_KEEP_EXCESS_VAR,
+    PRUNE_PER_PARAM, PRUNE_RATIO, STOP_FLOOR_RATIO,
 };
 use super::data::{Data, min_max, mse, noise_floor, sim};
 use super::fast_fit::fit_fast;
@@ -430,7 +431,18 @@ pub fn diagnose(base: &ModelFile, data: &[Data], opts: &Options) -> anyhow::Resu
                 (e, m, s, ms, ratio)
             })
             // The effect furthest below its own bar.
-            .min_by(|a, b| (a.4 / prune_bar(&a.0)).total_cmp(&(b.4 / prune_bar(&b.0))));
+            // Among the units below their bars, the largest first (two effects explained by
+            // the others are removed before one: fewer names for the same evidence), then
+            // the one furthest below its bar.
+            .min_by(|a, b| {
+                let below = |x: &(Vec<String>, ModelFile, Vec<Vec<f64>>, Vec<f64>, f64)| {
+                    x.4 < prune_bar(&x.0)
+                };
+                below(b)
+                    .cmp(&below(a))
+                    .then((below(b) as usize * b.0.len()).cmp(&(below(a) as usize * a.0.len())))
+                    .then((a.4 / prune_bar(&a.0)).total_cmp(&(b.4 / prune_bar(&b.0))))
+            });
         let Some((unit, m, s, ms, ratio)) = weakest else {
             break;
         };
