@@ -938,6 +938,27 @@ impl HysteresisMemory {
         self.merges = 0;
     }
 
+    /// Come up from the bottom of `table`'s range, visit the turning points `history_v` in
+    /// order, then go to `input_v`: the memory of a stage at rest after earlier motion (a stage
+    /// that came down from 8 V to 3 V is not on its major rising curve at 3 V). An empty
+    /// history is [`HysteresisMemory::reset`]. Bounded: one `forward` per point; non-finite
+    /// points are skipped (`forward` holds on them).
+    pub fn reset_after(&mut self, table: &HysteresisTable, history_v: &[f32], input_v: f32) {
+        self.reset(table, table.input_range_v().0);
+        for &p in history_v.iter().filter(|p| p.is_finite()) {
+            table.forward(self, p);
+        }
+        table.forward(
+            self,
+            if input_v.is_finite() {
+                input_v
+            } else {
+                table.input_range_v().0
+            },
+        );
+        self.flags = Flags::NONE;
+    }
+
     /// The last input applied (clamped), volts.
     #[inline]
     pub fn input_v(&self) -> f32 {
@@ -978,6 +999,32 @@ impl HysteresisMemory {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A stage that came down from 8 V sits on a descending curve at 3 V, above the major
+    /// rising curve by what the table says (the Everett value of the loop 3..8 V); no history
+    /// is the plain reset; the same input afterwards wipes the history alike.
+    #[test]
+    fn reset_after_a_history_stands_on_its_reversal_curve() {
+        let t = HysteresisTable::thesis_default();
+        let mut plain = HysteresisMemory::new();
+        plain.reset(&t, 3.0);
+        let mut none = HysteresisMemory::new();
+        none.reset_after(&t, &[], 3.0);
+        assert_eq!(plain, none);
+        let mut down = HysteresisMemory::new();
+        down.reset_after(&t, &[8.0], 3.0);
+        let (lo, _) = t.input_range_v();
+        let rising = t.offset_v() + t.everett_v(3.0, lo);
+        let falling = t.offset_v() + t.everett_v(8.0, lo) - t.everett_v(8.0, 3.0);
+        assert!((plain.output_v() - rising).abs() < 1e-5);
+        assert!((down.output_v() - falling).abs() < 1e-5);
+        // The default table's loop is 18.5 % of the span: a clear difference, not rounding.
+        assert!(down.output_v() - plain.output_v() > 0.1);
+        // Going above 8 V wipes the history: both memories agree from there on.
+        for u in [9.0f32, 2.0, 6.5] {
+            assert!((t.forward(&mut plain, u) - t.forward(&mut down, u)).abs() < 1e-6);
+        }
+    }
 
     #[test]
     fn default_constants_are_valid_and_table_fits() {

@@ -30,18 +30,24 @@ use crate::params::PLAY_OPERATORS;
 pub struct PlayConfig {
     /// Thresholds `r_i`, volts (0..10, finite).
     pub radii_v: [f64; PLAY_OPERATORS],
-    /// Weights `w_i`, sensor volts per volt (each within -1..1).
+    /// Weights `w_i`, sensor volts per volt (each within -100..100, and `|w_i r_i|`, the
+    /// operator's half-height on a large loop, within 5 V).
     pub weights: [f64; PLAY_OPERATORS],
 }
 
 impl PlayConfig {
-    /// Finite, thresholds within 0..10 V, weights within -1..1.
+    /// Finite, thresholds within 0..10 V, weights within -100..100, each operator's
+    /// half-height `|w_i r_i|` within 5 V (our assumptions: half the sensor's 10 V span bounds
+    /// any loop; a narrow operator may carry a large weight, as the corner of a loop that
+    /// turns sharply at a reversal needs, but not so large that the `f32` rounding of the
+    /// input, about 0.5 uV at 10 V, times the weight reaches the ADC's 0.3 mV step).
     pub fn validate(&self) -> Result<(), ConfigError> {
         for r in self.radii_v {
             check_within("radii_v", r, 0.0, 10.0)?;
         }
-        for w in self.weights {
-            check_within("weights", w, -1.0, 1.0)?;
+        for (w, r) in self.weights.iter().zip(&self.radii_v) {
+            check_within("weights", *w, -100.0, 100.0)?;
+            check_within("weights times radii_v", w * r, -5.0, 5.0)?;
         }
         Ok(())
     }

@@ -479,6 +479,15 @@ impl Stage {
     /// A state at rest with `u_v` held for ever (drift settled, hysteresis on the major rising
     /// curve as after coming up from the bottom of its range, sensor noise from the seed).
     pub fn steady_state(&self, u_v: f32) -> StageState {
+        self.steady_state_after(&[], u_v)
+    }
+
+    /// As [`Self::steady_state`], but the hysteresis memory is that of a stage that came up
+    /// from the bottom of the table's range through the turning points `history_v` (amplifier
+    /// control-input volts) before coming to rest at `u_v` ([`HysteresisMemory::reset_after`]);
+    /// the other blocks are at rest at `u_v` as in [`Self::steady_state`]. Without a table
+    /// the history changes nothing.
+    pub fn steady_state_after(&self, history_v: &[f32], u_v: f32) -> StageState {
         let u_v = if u_v.is_finite() { u_v } else { 0.0 };
         let command_v = self.dac(u_v);
         let amplifier = self.amplifier.steady_state(command_v);
@@ -489,7 +498,7 @@ impl Stage {
             .map_or(DriftState::default(), |d| d.steady_state(ue));
         let mut hysteresis = HysteresisMemory::new();
         if let Some(t) = &self.hysteresis {
-            hysteresis.reset(t, ue);
+            hysteresis.reset_after(t, history_v, ue);
         }
         let fast_v = self.fast(&mut hysteresis, ue);
         let drift_v = self.drift.as_ref().map_or(0.0, |d| d.output(&drift));

@@ -18,7 +18,7 @@
 //! every record by [`model_core::stage::Stage`] (never by a second simulator) and scored.
 
 use crate::io::model_file::{
-    DelaySection, DriftSection, GainSection, ModelFile, OffsetSection, PlaySection, PoleSection,
+    DelaySection, DriftSection, GainSection, ModelFile, OffsetSection, PoleSection,
     ResonanceSection, SaturationSection, SensorGainSection, SlewSection,
 };
 use model_core::params;
@@ -61,52 +61,14 @@ pub const DRIFT_TAU_GRID_S: [f64; 14] = [
     0.005, 0.01, 0.02, 0.05, 0.1, 0.2, 0.5, 1.0, 2.0, 5.0, 10.0, 20.0, 50.0, 200.0,
 ];
 
-/// Play-operator thresholds the hysteresis fit chooses from, volts at the amplifier input
-/// (geometric, ratio 1.41, 30 mV..5 V; our assumption: the sign-constrained solve picks a few
-/// of them, so a truth whose operators have other radii than any fixed set, such as
-/// `model_core::params::PLAY_RADII_V`, is still matched; adjacent grid radii differ little
-/// enough that merging two of them into one operator ([`reduce_play`]) changes a loop by a
-/// small fraction of their weight).
+/// Half-widths of the relays of the hysteresis basis ([`super::everett`]), volts at the
+/// amplifier input (geometric, ratio 1.41, 30 mV..5 V; our assumption: the sign-constrained
+/// solve picks a few of them, so a truth whose operators have other radii than any fixed
+/// set, such as `model_core::params::PLAY_RADII_V`, is still matched by its neighbours; the
+/// table's grid, 45 nodes over the records' span, blurs the narrowest ones into its cells).
 pub const PLAY_GRID_V: [f64; 16] = [
     0.03, 0.042, 0.06, 0.084, 0.12, 0.17, 0.24, 0.33, 0.47, 0.66, 0.93, 1.3, 1.85, 2.6, 3.7, 5.0,
 ];
-
-/// The grid's weights as the stage's [`params::PLAY_OPERATORS`] operators (radii, weights):
-/// the operators with a non-zero weight, the two closest in radius merged while there are too
-/// many (weight summed, radius the weight-averaged one, which keeps the loop's height on a
-/// large cycle, `2 sum w r`); unused operators get weight 0 and the default radii.
-pub fn reduce_play(
-    grid_w: &[f64],
-) -> ([f64; params::PLAY_OPERATORS], [f64; params::PLAY_OPERATORS]) {
-    let mut ops: Vec<(f64, f64)> = PLAY_GRID_V
-        .iter()
-        .zip(grid_w)
-        .filter(|(_, w)| **w != 0.0)
-        .map(|(r, w)| (*r, *w))
-        .collect();
-    while ops.len() > params::PLAY_OPERATORS {
-        let k = (0..ops.len() - 1)
-            .min_by(|&a, &b| (ops[a + 1].0 / ops[a].0).total_cmp(&(ops[b + 1].0 / ops[b].0)))
-            .unwrap_or(0);
-        let (r1, w1) = ops[k];
-        let (r2, w2) = ops[k + 1];
-        let w = w1 + w2;
-        let r = if w != 0.0 {
-            (w1 * r1 + w2 * r2) / w
-        } else {
-            0.5 * (r1 + r2)
-        };
-        ops[k] = (r.clamp(r1.min(r2), r1.max(r2)), w);
-        ops.remove(k + 1);
-    }
-    let mut radii = params::PLAY_RADII_V;
-    let mut weights = [0.0; params::PLAY_OPERATORS];
-    for (i, (r, w)) in ops.into_iter().enumerate() {
-        radii[i] = r;
-        weights[i] = w;
-    }
-    (radii, weights)
-}
 
 /// Is `effect` present in `m`?
 pub fn present(m: &ModelFile, effect: &str) -> bool {
@@ -131,6 +93,9 @@ pub fn param_count(effect: &str) -> usize {
         "resonance" => 2,
         // Three gains, three time constants and K(u)'s k1..k3.
         "drift" => 9,
+        // The basis has 64 weights, tied along the range by the smoothness penalty: what the
+        // records can set freely is about one weight per radius used, which a large loop
+        // puts at eight (our assumption, the play form's count before the bands).
         "hysteresis" => params::PLAY_OPERATORS,
         "nonlinear-gain" => 2,
         _ => 1,
@@ -141,6 +106,7 @@ pub fn param_count(effect: &str) -> usize {
 pub fn without_slow(m: &ModelFile) -> ModelFile {
     let mut m = m.clone();
     m.drift = None;
+    m.hysteresis = None;
     m.hysteresis_play = None;
     m.nonlinear_gain = None;
     m.sensor_gain = None;
@@ -222,14 +188,17 @@ pub fn params_of(m: &ModelFile, effect: &str) -> Vec<(String, f64)> {
             }
             v
         }),
-        "hysteresis" => m.hysteresis_play.as_ref().map_or(vec![], |h| {
-            h.radii_v
+        "hysteresis" => match (&m.hysteresis, &m.hysteresis_play) {
+            (Some(h), _) => super::everett::summary(h),
+            (None, Some(h)) => h
+                .radii_v
                 .iter()
                 .zip(&h.weights)
                 .filter(|(_, w)| **w != 0.0)
                 .map(|(r, w)| (format!("w_r{r:.3}v"), *w))
-                .collect()
-        }),
+                .collect(),
+            (None, None) => vec![],
+        },
         "nonlinear-gain" => m.nonlinear_gain.as_ref().map_or(vec![], |g| {
             vec![
                 ("c1_per_v".into(), g.poly[1]),
@@ -330,8 +299,8 @@ pub fn fast_value(m: &ModelFile, effect: &str) -> Option<(f64, f64)> {
 pub struct SlowParams {
     /// Drift: (gains, taus).
     pub drift: Option<([f64; 3], [f64; 3])>,
-    /// Play operators: (radii, weights).
-    pub hysteresis: Option<([f64; params::PLAY_OPERATORS], [f64; params::PLAY_OPERATORS])>,
+    /// Hysteresis: the basis weights and the table's range ([`super::everett`]).
+    pub hysteresis: Option<super::everett::HystFit>,
     /// K'(u) = 1 + c1 u + c2 u^2.
     pub gain: Option<(f64, f64)>,
     /// The drift's K(u), lowest power first (`None`: K = 1).
@@ -354,11 +323,8 @@ pub fn with_slow(m: &ModelFile, p: &SlowParams, u_range: (f64, f64)) -> Option<M
             poly_range_v: [u_range.0, u_range.1],
         });
     }
-    if let Some((radii_v, w)) = p.hysteresis {
-        m.hysteresis_play = Some(PlaySection {
-            radii_v,
-            weights: w,
-        });
+    if let Some(h) = &p.hysteresis {
+        m.hysteresis = Some(h.section(m.plant.static_gain));
     }
     if let Some((c1, c2)) = p.gain {
         m.nonlinear_gain = Some(GainSection {
@@ -372,5 +338,13 @@ pub fn with_slow(m: &ModelFile, p: &SlowParams, u_range: (f64, f64)) -> Option<M
     if let Some(offset_v) = p.offset_v {
         m.offset = Some(OffsetSection { offset_v });
     }
-    m.build_stage().ok().map(|_| m)
+    match m.build_stage() {
+        Ok(_) => Some(m),
+        Err(e) => {
+            if std::env::var("GAP_DEBUG").is_ok() {
+                eprintln!("with_slow rejected: {e:#}");
+            }
+            None
+        }
+    }
 }

@@ -66,3 +66,19 @@ pub const JUMP_RATIO: f64 = 4.0;
 /// assumption: a lag of 400 s on a 10 s sine record moved by a few per cent and took the part
 /// of a sensor offset; thesis-full's 12 s lag sits well inside 2x a 20..150 s slow record).
 pub const DRIFT_TAU_MAX_RECORDS: f64 = 2.0;
+
+/// The rising-minus-falling gap of the residual ([`super::signatures::Signatures::loop_v`])
+/// that `hysteresis` needs, in noise floors (our assumption: under noise alone the largest
+/// gap between two bin means of 20 samples or more stays near one noise sigma; three is a
+/// loop, not noise; a sensor-gain error with 1 mV of noise shows 0.5 mV, a real loop hundreds).
+pub const HYST_LOOP_MIN_NOISE: f64 = 3.0;
+
+/// Shortest run of constant input that counts as a hold, seconds (our assumption: long enough
+/// for a drift tail of 10-100 ms lags to show after the step's transient).
+pub const HOLD_MIN_S: f64 = 0.2;
+
+/// Records without holds cannot tell a drift from a hysteresis loop at low frequency when the
+/// other effect, fitted in the named one's place, leaves every record's residual within this
+/// factor of the named one's (RMS; our assumption: a quarter more is within what a misfit of
+/// form costs either effect on records nobody shaped).
+pub const CANNOT_TELL_RATIO: f64 = 1.25;

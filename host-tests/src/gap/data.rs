@@ -11,7 +11,7 @@
 use super::constants::{FAST_RATE_HZ, JUMP_MIN_V, JUMP_RATIO, MIN_SAMPLES, REVERSAL_MIN_V};
 use crate::io::csv::Record;
 use crate::io::model_file::ModelFile;
-use crate::sim::open_loop::simulate;
+use crate::sim::open_loop::simulate_after;
 use crate::util::median;
 use anyhow::{Context, bail, ensure};
 
@@ -112,6 +112,24 @@ impl Data {
         count
     }
 
+    /// Does the record hold its input constant for [`super::constants::HOLD_MIN_S`] at least
+    /// somewhere (where a drift shows as a tail and a hysteresis loop does not)?
+    pub fn has_hold(&self) -> bool {
+        let min = (super::constants::HOLD_MIN_S / self.period_s()).ceil() as usize;
+        let mut run = 1usize;
+        for w in self.u_v.windows(2) {
+            if (w[1] - w[0]).abs() <= 1e-9 {
+                run += 1;
+                if run >= min {
+                    return true;
+                }
+            } else {
+                run = 1;
+            }
+        }
+        false
+    }
+
     /// Never empty (checked on construction).
     pub fn is_empty(&self) -> bool {
         self.t_s.is_empty()
@@ -176,7 +194,13 @@ pub fn sim(model: &ModelFile, d: &Data) -> anyhow::Result<Vec<f64>> {
     let mut m = model.clone();
     m.converters.noise_v = 0.0;
     let stage = m.build_stage()?;
-    Ok(simulate(&stage, m.period_s, &d.t_s, &d.u_v))
+    Ok(simulate_after(
+        &stage,
+        m.period_s,
+        &m.start_history_v(),
+        &d.t_s,
+        &d.u_v,
+    ))
 }
 
 /// Read the records named on the command line: CSV or MATLAB v5 `.mat` (with `vars`).

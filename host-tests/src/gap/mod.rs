@@ -49,6 +49,7 @@ pub mod catalogue;
 pub mod constants;
 pub mod data;
 pub mod demo;
+pub mod everett;
 pub mod fast_fit;
 pub mod nnls;
 pub mod polish;
@@ -57,6 +58,7 @@ pub mod report;
 pub mod select;
 pub mod signatures;
 pub mod slow_fit;
+pub mod start;
 pub mod unexplained;
 
 pub use constants::*;

@@ -69,6 +69,12 @@ impl Diagnosis {
             1e3 * self.final_rms_v,
             self.final_rms_v / self.noise_floor_v.max(1e-12)
         ));
+        for c in &self.cannot_tell {
+            s.push_str(&format!(
+                "cannot tell {} from {}: {}\n",
+                c.named, c.alternative, c.why
+            ));
+        }
         if let Some(u) = &self.unexplained {
             s.push_str(&format!(
                 "unexplained: {:.2} mV above the noise, no catalogued effect is admissible; where: {}\n",
@@ -286,6 +292,15 @@ pub fn write(dir: &Path, base: &ModelFile, data: &[Data], d: &Diagnosis) -> anyh
         ));
     }
     h.push_str("</div>");
+    for c in &d.cannot_tell {
+        let _ = write!(
+            h,
+            "<h2>Cannot tell {} from {}</h2><p>{}</p>",
+            esc(&c.named),
+            esc(&c.alternative),
+            esc(&c.why)
+        );
+    }
     if let Some(u) = &d.unexplained {
         let _ = write!(
             h,

@@ -6,13 +6,15 @@
 
 use super::catalogue::{self, EFFECTS, FAST, SLOW};
 use super::constants::{
-    MAX_STEPS, MIN_EXPLAINED, PRUNE_KEEP_EXCESS_VAR, PRUNE_PER_PARAM, PRUNE_RATIO, STOP_FLOOR_RATIO,
+    CANNOT_TELL_RATIO, HOLD_MIN_S, MAX_STEPS, MIN_EXPLAINED, PRUNE_KEEP_EXCESS_VAR,
+    PRUNE_PER_PARAM, PRUNE_RATIO, STOP_FLOOR_RATIO,
 };
 use super::data::{Data, min_max, mse, noise_floor, sim};
 use super::fast_fit::fit_fast;
 use super::polish::refine_play_radii;
 use super::signatures;
 use super::slow_fit::{SlowRegressors, fit_slow, slow_regressors};
+use super::start;
 use super::unexplained::{Unexplained, locate};
 use crate::io::model_file::ModelFile;
 use crate::util::par_map;
@@ -71,6 +73,9 @@ pub struct Diagnosis {
     pub tried: Vec<Vec<(String, f64, f64, bool)>>,
     /// Signature checks of the base model's residual.
     pub signatures: signatures::Signatures,
+    /// Named effects the records cannot tell from another (no holds: a drift and a
+    /// hysteresis loop at low frequency), with the other's residual in its place.
+    pub cannot_tell: Vec<CannotTell>,
     /// The residual no catalogued effect explained, when some record stays above
     /// [`super::unexplained::UNEXPLAINED_FLOOR_RATIO`] times its floor.
     pub unexplained: Option<Unexplained>,
@@ -93,12 +98,77 @@ impl Diagnosis {
             "noise_floor_v": self.noise_floor_v,
             "final_rms_v": self.final_rms_v,
             "unexplained": self.unexplained,
+            "cannot_tell": self.cannot_tell,
         })
     }
 }
 
+/// A named effect the records cannot tell from another: fitted in its place, the other
+/// leaves every record's residual within [`CANNOT_TELL_RATIO`] of the named one's.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct CannotTell {
+    /// The effect named.
+    pub named: String,
+    /// The effect the records cannot tell from it.
+    pub alternative: String,
+    /// Final residual RMS over the records, volts.
+    pub rms_v: f64,
+    /// Residual RMS with the alternative in the named effect's place, volts.
+    pub alternative_rms_v: f64,
+    /// Why, and what record would tell them apart.
+    pub why: String,
+}
+
+/// The pairs the issue names (#12 item 1): without holds, a drift lag and a hysteresis loop
+/// both shape a slow periodic residual. Each is refitted in the other's place with the slow
+/// effects (no start-memory search for the alternative: a tie is then a real one).
+fn cannot_tell(
+    model: &ModelFile,
+    base: &ModelFile,
+    named: &[String],
+    data: &[Data],
+    slow_x: &SlowRegressors,
+    u_range: (f64, f64),
+    cur_mse: &[f64],
+) -> Vec<CannotTell> {
+    if data.iter().any(Data::has_hold) {
+        return Vec::new();
+    }
+    let pairs: Vec<(&str, &str)> = [("drift", "hysteresis"), ("hysteresis", "drift")]
+        .into_iter()
+        .filter(|(e, f)| named.iter().any(|n| n == e) && !named.iter().any(|n| n == f))
+        .collect();
+    let rms = |v: &[f64]| (v.iter().sum::<f64>() / v.len().max(1) as f64).sqrt();
+    pairs
+        .into_iter()
+        .filter_map(|(e, f)| {
+            let m = catalogue::revert(model, base, e);
+            let m = refit_slow(&m, Some(f), data, slow_x, u_range)?;
+            let ms: Vec<f64> = data
+                .iter()
+                .map(|d| sim(&m, d).ok().map(|s| mse(&d.y_v, &s)))
+                .collect::<Option<_>>()?;
+            let r2 = CANNOT_TELL_RATIO * CANNOT_TELL_RATIO;
+            let near = ms.iter().zip(cur_mse).all(|(a, b)| *a <= r2 * *b);
+            near.then(|| CannotTell {
+                named: e.to_string(),
+                alternative: f.to_string(),
+                rms_v: rms(cur_mse),
+                alternative_rms_v: rms(&ms),
+                why: format!(
+                    "no record holds its input for {HOLD_MIN_S} s, and {f} in place of {e} \
+                     leaves {:.2} mV against {:.2} mV: record holds (the recommended \
+                     protocol) to tell them apart",
+                    1e3 * rms(&ms),
+                    1e3 * rms(cur_mse)
+                ),
+            })
+        })
+        .collect()
+}
+
 /// A pruning trial: effect, model without it, its simulations and mean squares.
-type Trial = (String, ModelFile, Vec<Vec<f64>>, Vec<f64>);
+type Trial = (Vec<String>, ModelFile, Vec<Vec<f64>>, Vec<f64>);
 
 /// Options of the workflow.
 #[derive(Clone, Debug, Default)]
@@ -160,7 +230,7 @@ pub fn diagnose(base: &ModelFile, data: &[Data], opts: &Options) -> anyhow::Resu
         .map(|(d, s)| mse(&d.y_v, s))
         .collect();
     let base_sigs = signatures::compute(data, &sims, &noise);
-    let slow_x = slow_regressors(data);
+    let mut slow_x = slow_regressors(data, &[]);
     let mut steps: Vec<Step> = Vec::new();
     let mut named: Vec<String> = Vec::new();
     let mut tried = Vec::new();
@@ -280,6 +350,26 @@ pub fn diagnose(base: &ModelFile, data: &[Data], opts: &Options) -> anyhow::Resu
         model = best.model;
         sims = best.sims;
         cur_mse = best.mse;
+        // A new or refitted hysteresis table: the start memory that suits it, the slow
+        // effects refitted from it (folded into this step: it is the table's own state).
+        if steps.last().is_some_and(|s| s.effect == "hysteresis")
+            && !at_floor_now(&cur_mse, &var)
+            && let Some(f) = start::search(&model, data, &slow_x, u_range, &cur_mse)
+        {
+            slow_x = f.slow_x;
+            model = f.model;
+            sims = f.sims;
+            cur_mse = f.mse;
+            if let Some(s) = steps.last_mut() {
+                s.rms_after_v = (cur_mse.iter().sum::<f64>() / cur_mse.len() as f64).sqrt();
+                s.record_rms_after_v = cur_mse.iter().map(|m| m.sqrt()).collect();
+                s.sims = sims.clone();
+                s.params.clear();
+                for (k, v) in catalogue::params_of(&model, "hysteresis") {
+                    s.params.insert(k, serde_json::json!(v));
+                }
+            }
+        }
     }
     // Final check: take each named effect back out (refitting the slow ones left) and keep it
     // only if the residual above the noise floor grows by PRUNE_RATIO at least.
@@ -287,15 +377,27 @@ pub fn diagnose(base: &ModelFile, data: &[Data], opts: &Options) -> anyhow::Resu
         if let Some(b) = &bar {
             b.set_message("final check of each named effect");
         }
-        let trials = par_map(&named, |e| -> Option<Trial> {
-            let m = reverted_refit(&model, base, e, data, &slow_x, u_range)?;
+        // Removal units: each named effect, and the sensor's affine pair when both are named
+        // (an offset and a scale together make `a + b y`, which mops up a misfit of the
+        // table's form; each alone is then needed by the other and only the pair can go).
+        let mut units: Vec<Vec<String>> = named.iter().map(|e| vec![e.clone()]).collect();
+        let pair = ["offset", "sensor-gain"];
+        if pair.iter().all(|p| named.iter().any(|n| n == p)) {
+            units.push(pair.iter().map(|p| p.to_string()).collect());
+        }
+        let trials = par_map(&units, |unit| -> Option<Trial> {
+            let mut m = model.clone();
+            for e in unit {
+                m = catalogue::revert(&m, base, e);
+            }
+            let m = refit_slow(&m, None, data, &slow_x, u_range)?;
             let s: Vec<Vec<f64>> = data
                 .iter()
                 .map(|d| sim(&m, d))
                 .collect::<anyhow::Result<_>>()
                 .ok()?;
             let ms = data.iter().zip(&s).map(|(d, y)| mse(&d.y_v, y)).collect();
-            Some((e.clone(), m, s, ms))
+            Some((unit.clone(), m, s, ms))
         });
         // The largest growth over the records of the residual power above the floor.
         let growth = |ms: &[f64]| {
@@ -313,8 +415,9 @@ pub fn diagnose(base: &ModelFile, data: &[Data], opts: &Options) -> anyhow::Resu
             .into_iter()
             .flatten()
             .map(|(e, m, s, ms)| {
-                let line_back =
-                    e == "resonance" && signatures::compute(data, &s, &noise).supports(&e, &model);
+                let line_back = e.len() == 1
+                    && e[0] == "resonance"
+                    && signatures::compute(data, &s, &noise).supports(&e[0], &model);
                 // An effect whose removal adds more than PRUNE_KEEP_EXCESS_VAR noise variances
                 // to some record's residual power explains a component no noise makes: it stays
                 // whatever the ratio (far from the floor, ratios are compressed).
@@ -328,35 +431,49 @@ pub fn diagnose(base: &ModelFile, data: &[Data], opts: &Options) -> anyhow::Resu
                 (e, m, s, ms, ratio)
             })
             // The effect furthest below its own bar.
+            // Among the units below their bars, the largest first (two effects explained by
+            // the others are removed before one: fewer names for the same evidence), then
+            // the one furthest below its bar.
             .min_by(|a, b| {
-                let bar =
-                    |e: &str| PRUNE_RATIO + PRUNE_PER_PARAM * catalogue::param_count(e) as f64;
-                (a.4 / bar(&a.0)).total_cmp(&(b.4 / bar(&b.0)))
+                let below = |x: &(Vec<String>, ModelFile, Vec<Vec<f64>>, Vec<f64>, f64)| {
+                    x.4 < prune_bar(&x.0)
+                };
+                below(b)
+                    .cmp(&below(a))
+                    .then((below(b) as usize * b.0.len()).cmp(&(below(a) as usize * a.0.len())))
+                    .then((a.4 / prune_bar(&a.0)).total_cmp(&(b.4 / prune_bar(&b.0))))
             });
-        let Some((e, m, s, ms, ratio)) = weakest else {
+        let Some((unit, m, s, ms, ratio)) = weakest else {
             break;
         };
-        let bar_e = PRUNE_RATIO + PRUNE_PER_PARAM * catalogue::param_count(&e) as f64;
+        let bar_e = prune_bar(&unit);
         if ratio >= bar_e {
             break;
         }
         let rms_before = (cur_mse.iter().sum::<f64>() / cur_mse.len() as f64).sqrt();
         let rms_after = (ms.iter().sum::<f64>() / ms.len() as f64).sqrt();
-        steps.push(Step {
-            effect: e.clone(),
-            evidence: format!(
-                "removed in the final check: without it the residual above the noise floor grows only {ratio:.2}x (< {bar_e:.2}x)"
-            ),
-            params: serde_json::Map::new(),
-            rms_before_v: rms_before,
-            rms_after_v: rms_after,
-            record_rms_before_v: cur_mse.iter().map(|m| m.sqrt()).collect(),
-            record_rms_after_v: ms.iter().map(|m| m.sqrt()).collect(),
-            sims: s.clone(),
-            refit: false,
-            removed: true,
-        });
-        named.retain(|x| *x != e);
+        for e in &unit {
+            let with = if unit.len() > 1 {
+                format!(" (as a pair: {})", unit.join(" and "))
+            } else {
+                String::new()
+            };
+            steps.push(Step {
+                effect: e.clone(),
+                evidence: format!(
+                    "removed in the final check{with}: without it the residual above the noise floor grows only {ratio:.2}x (< {bar_e:.2}x)"
+                ),
+                params: serde_json::Map::new(),
+                rms_before_v: rms_before,
+                rms_after_v: rms_after,
+                record_rms_before_v: cur_mse.iter().map(|m| m.sqrt()).collect(),
+                record_rms_after_v: ms.iter().map(|m| m.sqrt()).collect(),
+                sims: s.clone(),
+                refit: false,
+                removed: true,
+            });
+        }
+        named.retain(|x| !unit.contains(x));
         model = m;
         sims = s;
         cur_mse = ms;
@@ -478,6 +595,7 @@ pub fn diagnose(base: &ModelFile, data: &[Data], opts: &Options) -> anyhow::Resu
         &mut cur_mse,
         &mut steps,
     );
+    let cannot_tell = cannot_tell(&model, base, &named, data, &slow_x, u_range, &cur_mse);
     let unexplained = locate(data, &sims, &noise);
     if let Some(b) = &bar {
         b.finish_and_clear();
@@ -495,6 +613,7 @@ pub fn diagnose(base: &ModelFile, data: &[Data], opts: &Options) -> anyhow::Resu
         tried,
         signatures: base_sigs,
         unexplained,
+        cannot_tell,
     })
 }
 
@@ -573,22 +692,15 @@ fn at_floor_now(cur_mse: &[f64], var: &[f64]) -> bool {
 /// A model, its simulations and mean squares.
 type Trial3 = (ModelFile, Vec<Vec<f64>>, Vec<f64>);
 
-/// `model` with `effect` taken back to what `base` has, the slow effects left refitted.
-fn reverted_refit(
-    model: &ModelFile,
-    base: &ModelFile,
-    effect: &str,
-    data: &[Data],
-    slow_x: &SlowRegressors,
-    u_range: (f64, f64),
-) -> Option<ModelFile> {
-    refit_slow(
-        &catalogue::revert(model, base, effect),
-        None,
-        data,
-        slow_x,
-        u_range,
-    )
+/// The final check's bar for removing `unit`: the growth of the residual above the floor
+/// that its parameters must earn.
+fn prune_bar(unit: &[String]) -> f64 {
+    PRUNE_RATIO
+        + PRUNE_PER_PARAM
+            * unit
+                .iter()
+                .map(|e| catalogue::param_count(e) as f64)
+                .sum::<f64>()
 }
 
 /// `m` with its slow effects, and `extra` if given, fitted afresh together to the residual of

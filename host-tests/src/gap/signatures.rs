@@ -23,7 +23,7 @@
 //! Each is a number with a unit; [`Signatures::supports`] turns them into the gate the
 //! selection uses, [`Signatures::describe`] into words for the table.
 
-use super::{Data, LINE_RATIO_MIN, MAX_MODE_DAMPING, catalogue};
+use super::{Data, HYST_LOOP_MIN_NOISE, LINE_RATIO_MIN, MAX_MODE_DAMPING, catalogue};
 use crate::io::model_file::ModelFile;
 use model_core::params;
 use rustfft::{FftPlanner, num_complex::Complex};
@@ -108,7 +108,7 @@ pub fn compute(data: &[Data], sims: &[Vec<f64>], noise: &[f64]) -> Signatures {
                 s.peak_hz = strongest_line_hz(&s.welch);
             }
         }
-        // Holds: runs of constant input of at least 0.2 s.
+        // Holds: runs of constant input of at least HOLD_MIN_S.
         let mut i = 1;
         while i < n {
             let start = i;
@@ -116,7 +116,7 @@ pub fn compute(data: &[Data], sims: &[Vec<f64>], noise: &[f64]) -> Signatures {
                 i += 1;
             }
             let len = i - start;
-            if len as f64 * t >= 0.2 {
+            if len as f64 * t >= super::constants::HOLD_MIN_S {
                 let skip = ((0.02 / t).ceil() as usize).min(len / 4);
                 let w = ((len - skip) / 10).max(1);
                 let a = mean(&r[start + skip..start + skip + w]);
@@ -284,6 +284,9 @@ impl Signatures {
         let lim_hi = params::AMP_INPUT_MAX_V - 0.5;
         match effect {
             "saturation" => self.u_span_v.0 <= lim_lo || self.u_span_v.1 >= lim_hi,
+            // The table's reversible slopes can take any scale or curvature too: hysteresis is
+            // named only where the residual shows a loop.
+            "hysteresis" => self.loop_v >= HYST_LOOP_MIN_NOISE * self.noise_v,
             "resonance" => catalogue::fast_value(model, "resonance").is_some_and(|(f, z)| {
                 z <= MAX_MODE_DAMPING && self.line_ratio_near(f) >= LINE_RATIO_MIN
             }),

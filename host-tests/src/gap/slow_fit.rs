@@ -14,20 +14,48 @@ use super::constants::{
     DRIFT_REFINE_PASSES, DRIFT_REFINE_TOL_V2, DRIFT_TAU_MAX_RECORDS, SETTLE_S, STRUCTURE_ROUNDS,
 };
 use super::data::Data;
+use super::everett::{self, HYST_COLS, HYST_FIT_COLS, HystFit};
 use super::nnls::{nnls_normal, ridge};
 use crate::util::golden_n;
 use model_core::params;
 use nalgebra::{DMatrix, DVector};
 
-/// The slow effects' regressors at every record's samples (they depend on the input only).
+/// The slow effects' regressors at the rows the solve uses (they depend on the input only).
 pub struct SlowRegressors {
-    /// Per record: columns (drift lags for each grid time constant, play terms, gain terms).
+    /// Per record: columns at the rows (drift lags for each grid time constant, the
+    /// hysteresis basis, gain terms).
     cols: Vec<Vec<Vec<f64>>>,
-    /// Per record: is the sample settled (used by the solve)?
-    mask: Vec<Vec<bool>>,
-    /// Per record: the drift lags' input, `K(u) u` (`u` while K = 1).
+    /// Per record: the samples the solve uses, rising: the settled ones, evenly thinned to at
+    /// most [`MAX_SLOW_ROWS`].
+    rows: Vec<Vec<usize>>,
+    /// Per record: the drift lags' input, `K(u) u` (`u` while K = 1), every sample.
     drive: Vec<Vec<f64>>,
+    /// Per record: the hysteresis basis at the rows, before the K'(u) scaling (computed once:
+    /// it is the costly part).
+    hyst: std::sync::Arc<Vec<Vec<Vec<f64>>>>,
+    /// The hysteresis table's input range.
+    range: (f64, f64),
+    /// The hysteresis start memory the basis was computed with.
+    start_v: Vec<f64>,
 }
+
+impl SlowRegressors {
+    /// The hysteresis table's input range.
+    pub fn range(&self) -> (f64, f64) {
+        self.range
+    }
+
+    /// The hysteresis start memory of the basis.
+    pub fn start_v(&self) -> &[f64] {
+        &self.start_v
+    }
+}
+
+/// Rows of one record the slow solve uses at most (our assumption: the slow effects change
+/// over milliseconds or more, so 20 000 settled samples, evenly spread, carry what the whole
+/// record does; the Gram matrix of the 96 columns then costs the same for any record length,
+/// and the regressors' memory stays at 15 MB a record).
+pub const MAX_SLOW_ROWS: usize = 20_000;
 
 /// How the slow regressors are shaped by the slow effects' non-linear parameters (the
 /// structural refinement of [`fit_slow`]).
@@ -57,11 +85,10 @@ impl Shape {
 }
 
 const N_TAU: usize = catalogue::DRIFT_TAU_GRID_S.len();
-const N_PLAY: usize = catalogue::PLAY_GRID_V.len();
-const COL_PLAY: usize = N_TAU;
-const COL_GAIN: usize = N_TAU + N_PLAY;
+const COL_HYST: usize = N_TAU;
+const COL_GAIN: usize = N_TAU + HYST_COLS;
 /// Columns that depend on the input alone (kept in [`SlowRegressors`]).
-const N_INPUT_COLS: usize = N_TAU + N_PLAY + 2;
+const N_INPUT_COLS: usize = N_TAU + HYST_COLS + 2;
 /// The offset's column: a constant 1.
 const COL_OFFSET: usize = N_INPUT_COLS;
 /// The sensor gain's column: the simulated output without slow effects (`y0`): a scale error
@@ -69,14 +96,14 @@ const COL_OFFSET: usize = N_INPUT_COLS;
 const COL_SGAIN: usize = N_INPUT_COLS + 1;
 const N_COLS: usize = N_INPUT_COLS + 2;
 
-/// Value of regressor column `c` of record `r` at sample `i` (`y0`: the simulated output
+/// Value of regressor column `c` of record `r` at row `j` (`y0`: the simulated output
 /// without slow effects, the sensor gain's column).
 #[inline]
-fn col(x: &SlowRegressors, y0: &[Vec<f64>], r: usize, c: usize, i: usize) -> f64 {
+fn col(x: &SlowRegressors, y0: &[Vec<f64>], r: usize, c: usize, j: usize) -> f64 {
     match c {
         COL_OFFSET => 1.0,
-        COL_SGAIN => y0[r][i],
-        _ => x.cols[r][c][i],
+        COL_SGAIN => y0[r][x.rows[r][j]],
+        _ => x.cols[r][c][j],
     }
 }
 
@@ -84,7 +111,7 @@ fn col(x: &SlowRegressors, y0: &[Vec<f64>], r: usize, c: usize, i: usize) -> f64
 fn fixed_cols(set: &[&str]) -> Vec<usize> {
     let mut fixed: Vec<usize> = Vec::new();
     if set.contains(&"hysteresis") {
-        fixed.extend(COL_PLAY..COL_PLAY + N_PLAY);
+        fixed.extend(COL_HYST..COL_HYST + HYST_FIT_COLS);
     }
     if set.contains(&"nonlinear-gain") {
         fixed.extend([COL_GAIN, COL_GAIN + 1]);
@@ -98,17 +125,58 @@ fn fixed_cols(set: &[&str]) -> Vec<usize> {
     fixed
 }
 
-pub(super) fn slow_regressors(data: &[Data]) -> SlowRegressors {
-    slow_regressors_shaped(data, &Shape::default())
+/// The regressors of `data`, the hysteresis basis starting every record from the memory
+/// `start_v` (turning points, [`everett::start_candidates`]).
+pub(super) fn slow_regressors(data: &[Data], start_v: &[f64]) -> SlowRegressors {
+    let rows: Vec<Vec<usize>> = data.iter().map(solve_rows).collect();
+    let (lo, hi) = data
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), d| {
+            let (l, h) = super::data::min_max(&d.u_v);
+            (a.min(l), b.max(h))
+        });
+    let range = everett::hyst_range(lo, hi);
+    let hyst = crate::util::par_map(&data.iter().zip(&rows).collect::<Vec<_>>(), |(d, r)| {
+        everett::columns(&d.u_v, r, range, start_v)
+    });
+    let base = SlowRegressors {
+        cols: Vec::new(),
+        rows,
+        drive: Vec::new(),
+        hyst: std::sync::Arc::new(hyst),
+        range,
+        start_v: start_v.to_vec(),
+    };
+    slow_regressors_shaped(data, &Shape::default(), &base)
 }
 
+/// The rows of record `d` the slow solve uses: the settled samples (no input jump of more
+/// than 20 mV within [`SETTLE_S`] before), evenly thinned to at most [`MAX_SLOW_ROWS`].
+fn solve_rows(d: &Data) -> Vec<usize> {
+    let n = d.len();
+    let settle = (SETTLE_S / d.period_s()).ceil() as usize;
+    let mut settled = Vec::with_capacity(n);
+    let mut last_jump: Option<usize> = None;
+    for i in 0..n {
+        if d.is_jump(i) {
+            last_jump = Some(i);
+        }
+        if last_jump.is_none_or(|j| i - j > settle) {
+            settled.push(i);
+        }
+    }
+    let stride = settled.len().div_ceil(MAX_SLOW_ROWS).max(1);
+    settled.into_iter().step_by(stride).collect()
+}
+
+/// The regressors for `shape`, at the rows of `base` and with its hysteresis basis.
 #[allow(clippy::needless_range_loop)] // several arrays indexed together
-fn slow_regressors_shaped(data: &[Data], shape: &Shape) -> SlowRegressors {
+fn slow_regressors_shaped(data: &[Data], shape: &Shape, base: &SlowRegressors) -> SlowRegressors {
     let mut cols = Vec::new();
-    let mut mask = Vec::new();
     let mut drives = Vec::new();
-    for d in data {
+    for (r, d) in data.iter().enumerate() {
         let n = d.len();
+        let rows = &base.rows[r];
         let t = d.period_s();
         let drive: Vec<f64> = d.u_v.iter().map(|&u| shape.drive(u)).collect();
         let mut c: Vec<Vec<f64>> = Vec::with_capacity(N_COLS);
@@ -116,54 +184,41 @@ fn slow_regressors_shaped(data: &[Data], shape: &Shape) -> SlowRegressors {
             // Exact ZOH first-order lag of the held drive, at rest at its first value.
             let a = (-t / tau).exp();
             let mut x = drive[0];
-            let mut v = Vec::with_capacity(n);
+            let mut v = Vec::with_capacity(rows.len());
+            let mut next = 0usize;
             for i in 0..n {
-                v.push(x);
+                if next < rows.len() && rows[next] == i {
+                    v.push(x);
+                    next += 1;
+                }
                 x = a * x + (1.0 - a) * drive[i];
             }
             c.push(v);
         }
-        for r in catalogue::PLAY_GRID_V {
-            let mut z = d.u_v[0];
-            c.push(
-                d.u_v
-                    .iter()
-                    .map(|&u| {
-                        z = z.max(u - r).min(u + r);
-                        (z - u) * shape.kprime(u)
-                    })
-                    .collect(),
-            );
+        let kp: Vec<f64> = rows.iter().map(|&i| shape.kprime(d.u_v[i])).collect();
+        for h in base.hyst[r].iter() {
+            c.push(h.iter().zip(&kp).map(|(v, k)| v * k).collect());
         }
-        c.push(d.u_v.iter().map(|u| params::PLANT_GAIN * u * u).collect());
         c.push(
-            d.u_v
-                .iter()
-                .map(|u| params::PLANT_GAIN * u * u * u)
+            rows.iter()
+                .map(|&i| params::PLANT_GAIN * d.u_v[i] * d.u_v[i])
                 .collect(),
         );
-        // Settled: no input jump (> 20 mV) within SETTLE_S before.
-        let settle = (SETTLE_S / t).ceil() as usize;
-        let mut m = vec![true; n];
-        let mut last_jump: Option<usize> = None;
-        for i in 0..n {
-            if d.is_jump(i) {
-                last_jump = Some(i);
-            }
-            if let Some(j) = last_jump
-                && i - j <= settle
-            {
-                m[i] = false;
-            }
-        }
+        c.push(
+            rows.iter()
+                .map(|&i| params::PLANT_GAIN * d.u_v[i] * d.u_v[i] * d.u_v[i])
+                .collect(),
+        );
         cols.push(c);
-        mask.push(m);
         drives.push(drive);
     }
     SlowRegressors {
         cols,
-        mask,
+        rows: base.rows.clone(),
         drive: drives,
+        hyst: base.hyst.clone(),
+        range: base.range,
+        start_v: base.start_v.clone(),
     }
 }
 
@@ -203,7 +258,7 @@ pub(super) fn fit_slow(
         if has_drift && let Some(k) = fit_drift_poly(data, y0, x, &shape, &p) {
             shape.kdrift = Some(k);
         }
-        let xs = slow_regressors_shaped(data, &shape);
+        let xs = slow_regressors_shaped(data, &shape, x);
         match fit_slow_linear(data, y0, &xs, set, p.drift.map(|d| d.1)) {
             Some(mut q) => {
                 q.drift_poly = shape.kdrift;
@@ -233,10 +288,10 @@ fn fit_drift_poly(
         kdrift: None,
         ..*shape
     };
-    let xs = slow_regressors_shaped(data, &plain);
+    let xs = slow_regressors_shaped(data, &plain, x);
     let mut fixed: Vec<usize> = Vec::new();
     if p.hysteresis.is_some() {
-        fixed.extend(COL_PLAY..COL_PLAY + N_PLAY);
+        fixed.extend(COL_HYST..COL_HYST + HYST_FIT_COLS);
     }
     if p.gain.is_some() {
         fixed.extend([COL_GAIN, COL_GAIN + 1]);
@@ -262,17 +317,19 @@ fn fit_drift_poly(
         for (j, l) in lp.iter_mut().enumerate() {
             *l = [x0(d.u_v[0], j as i32 + 1); 3];
         }
-        let m = &x.mask[r];
-        let w = 1.0 / m.iter().filter(|v| **v).count().max(1) as f64;
+        let rows = &x.rows[r];
+        let w = 1.0 / rows.len().max(1) as f64;
+        let mut next = 0usize;
         for i in 0..d.len() {
-            if m[i] {
+            if next < rows.len() && rows[next] == i {
                 row[..3].copy_from_slice(&lu);
                 for j in 0..3 {
                     row[3 + j] = (0..3).map(|k| gains[k] * lp[j][k]).sum();
                 }
                 for (c, &col) in fixed.iter().enumerate() {
-                    row[6 + c] = self::col(&xs, y0, r, col, i);
+                    row[6 + c] = self::col(&xs, y0, r, col, next);
                 }
+                next += 1;
                 let e = d.y_v[i] - y0[r][i];
                 for k in 0..np {
                     b[k] += w * row[k] * e;
@@ -295,6 +352,7 @@ fn fit_drift_poly(
             g[(l, k)] = g[(k, l)];
         }
     }
+    band_penalty(&mut g, &fixed, 6);
     ridge(&mut g);
     let nonneg: Vec<bool> = (0..np)
         .map(|k| k < 3 || (k >= 6 && is_nonneg_col(fixed[k - 6])))
@@ -325,19 +383,15 @@ fn fit_slow_linear(
     let mut b = DVector::<f64>::zeros(N_COLS);
     for (r, d) in data.iter().enumerate() {
         let cols = &x.cols[r];
-        let m = &x.mask[r];
-        let n_used = m.iter().filter(|v| **v).count().max(1) as f64;
-        let w = 1.0 / n_used;
-        let mut gl = [[0.0f64; N_COLS]; N_COLS];
+        let rows = &x.rows[r];
+        let w = 1.0 / rows.len().max(1) as f64;
+        let mut gl = vec![[0.0f64; N_COLS]; N_COLS];
         let mut bl = [0.0f64; N_COLS];
         let mut row = [0.0f64; N_COLS];
-        for i in 0..d.len() {
-            if !m[i] {
-                continue;
-            }
+        for (j, &i) in rows.iter().enumerate() {
             let e = d.y_v[i] - y0[r][i];
             for (k, c) in cols.iter().enumerate() {
-                row[k] = c[i];
+                row[k] = c[j];
             }
             row[COL_OFFSET] = 1.0;
             row[COL_SGAIN] = y0[r][i];
@@ -368,6 +422,7 @@ fn fit_slow_linear(
                 a[(i, j)] = g[(ki, kj)];
             }
         }
+        band_penalty(&mut a, idx, 0);
         ridge(&mut a);
         let nonneg: Vec<bool> = idx.iter().map(|&k| is_nonneg_col(k)).collect();
         let beta = nnls_normal(&a, &v, &nonneg)?;
@@ -396,9 +451,10 @@ fn fit_slow_linear(
                     ],
                 )
             }),
-            hysteresis: set.contains(&"hysteresis").then(|| {
-                let w: Vec<f64> = (0..N_PLAY).map(|i| get(COL_PLAY + i)).collect();
-                catalogue::reduce_play(&w)
+            hysteresis: set.contains(&"hysteresis").then(|| HystFit {
+                start_v: x.start_v.clone(),
+                range: x.range,
+                weights: (0..HYST_COLS).map(|i| get(COL_HYST + i)).collect(),
             }),
             gain: set
                 .contains(&"nonlinear-gain")
@@ -536,8 +592,8 @@ fn descale(mut p: SlowParams) -> SlowParams {
             *v /= g;
         }
     }
-    if let Some((_, w)) = p.hysteresis.as_mut() {
-        for v in w.iter_mut() {
+    if let Some(h) = p.hysteresis.as_mut() {
+        for v in h.weights.iter_mut() {
             *v /= g;
         }
     }
@@ -555,7 +611,15 @@ fn descale(mut p: SlowParams) -> SlowParams {
 /// could turn clockwise or the output run backwards after a reversal, which no stage does;
 /// unconstrained, a lone hysteresis fit soaks up drift and gain errors with weights of +-2.
 fn is_nonneg_col(k: usize) -> bool {
-    k < N_TAU || (COL_PLAY..COL_PLAY + N_PLAY).contains(&k)
+    k < N_TAU || (COL_HYST..COL_HYST + everett::HYST_LOOP_COLS).contains(&k)
+}
+
+/// The hysteresis basis' smoothness penalty ([`everett::add_band_penalty`]) on a Gram matrix
+/// whose rows from `at` on are the regressor columns `cols`.
+fn band_penalty(g: &mut DMatrix<f64>, cols: &[usize], at: usize) {
+    everett::add_band_penalty(g, |c| {
+        cols.iter().position(|&k| k == COL_HYST + c).map(|p| at + p)
+    });
 }
 
 /// The drift refinement's fixed part, computed once per [`fit_slow`] call: per record the
@@ -595,12 +659,12 @@ impl<'a> DriftProblem<'a> {
             .iter()
             .enumerate()
             .map(|(r, d)| {
-                let idx: Vec<usize> = (0..d.len()).filter(|&i| x.mask[r][i]).collect();
+                let idx: Vec<usize> = x.rows[r].clone();
                 let w = 1.0 / idx.len().max(1) as f64;
                 let e = idx.iter().map(|&i| d.y_v[i] - y0[r][i]).collect();
                 let mut f = Vec::with_capacity(idx.len() * nf);
-                for &i in &idx {
-                    f.extend(fixed.iter().map(|&c| col(x, y0, r, c, i)));
+                for j in 0..idx.len() {
+                    f.extend(fixed.iter().map(|&c| col(x, y0, r, c, j)));
                 }
                 (w, idx, e, f)
             })
@@ -667,6 +731,7 @@ impl<'a> DriftProblem<'a> {
                 }
             }
         }
+        band_penalty(&mut g, &self.fixed, 3);
         ridge(&mut g);
         let nonneg: Vec<bool> = (0..p)
             .map(|k| k < 3 || is_nonneg_col(self.fixed[k - 3]))

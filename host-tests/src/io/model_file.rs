@@ -220,7 +220,17 @@ pub struct HysteresisSection {
     /// Grid form: the packed Everett values, sensor volts.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub everett_v: Option<Vec<f32>>,
+    /// The memory the stage starts a record with: the turning points of the input before the
+    /// record, volts at the amplifier input, after coming up from the bottom of the range
+    /// (`[8.0]`: it came down from 8 V to the record's first input). Absent or empty: on the
+    /// major rising curve. At most [`MAX_START_TURNS`] points, inside the table's range.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub start_turns_v: Option<Vec<f64>>,
 }
+
+/// Turning points a `start_turns_v` may hold (the memory's depth less the bottom and the
+/// record's first input).
+pub const MAX_START_TURNS: usize = model_core::hysteresis::MEMORY_DEPTH - 2;
 
 impl HysteresisSection {
     /// The grid form of `t`.
@@ -232,12 +242,39 @@ impl HysteresisSection {
             dc_gain: None,
             loop_width_frac: None,
             everett_v: Some(t.everett_grid_v().to_vec()),
+            start_turns_v: None,
         }
     }
 
-    /// The table, or an error naming the problem.
+    /// The start memory's turning points (empty: the major rising curve).
+    pub fn start_history_v(&self) -> Vec<f32> {
+        self.start_turns_v
+            .as_deref()
+            .unwrap_or(&[])
+            .iter()
+            .map(|&v| v as f32)
+            .collect()
+    }
+
+    /// The table, or an error naming the problem (the start memory is checked too).
     pub fn table(&self) -> anyhow::Result<HysteresisTable> {
         let [lo, hi] = self.input_range_v;
+        if let Some(turns) = &self.start_turns_v {
+            if turns.len() > MAX_START_TURNS {
+                bail!(
+                    "[hysteresis] start_turns_v: {} turning points, at most {MAX_START_TURNS}",
+                    turns.len()
+                );
+            }
+            if let Some(v) = turns
+                .iter()
+                .find(|v| !v.is_finite() || **v < lo || **v > hi)
+            {
+                bail!(
+                    "[hysteresis] start_turns_v: {v} V is outside the table's range {lo}..{hi} V"
+                );
+            }
+        }
         let r = match (&self.everett_v, self.dc_gain, self.loop_width_frac) {
             (Some(e), None, None) => {
                 HysteresisTable::from_grid(lo as f32, hi as f32, self.offset_v as f32, e)
@@ -614,6 +651,14 @@ impl ModelFile {
         model_core::sensor::Sensor::new(&c.sensor)
             .map_err(|e| anyhow::anyhow!("[converters] / [sensor-gain] / [offset]: {e}"))?;
         Ok(())
+    }
+
+    /// The turning points the stage's hysteresis memory starts a record with (`[hysteresis]
+    /// start_turns_v`; empty without a table or a start memory).
+    pub fn start_history_v(&self) -> Vec<f32> {
+        self.hysteresis
+            .as_ref()
+            .map_or_else(Vec::new, HysteresisSection::start_history_v)
     }
 
     /// The model-core stage, or an error naming the refused table.

@@ -13,13 +13,26 @@ use model_core::stage::Stage;
 /// `period_s` is the stage's fixed step. Both slices must have equal length (the shorter
 /// length is used otherwise).
 pub fn simulate(stage: &Stage, period_s: f64, t_s: &[f64], u_v: &[f64]) -> Vec<f64> {
+    simulate_after(stage, period_s, &[], t_s, u_v)
+}
+
+/// As [`simulate`], with the hysteresis memory of a stage that went through the turning points
+/// `history_v` before the record ([`Stage::steady_state_after`]; a model file's
+/// `[hysteresis] start_turns_v`).
+pub fn simulate_after(
+    stage: &Stage,
+    period_s: f64,
+    history_v: &[f32],
+    t_s: &[f64],
+    u_v: &[f64],
+) -> Vec<f64> {
     let n = t_s.len().min(u_v.len());
     let mut y = Vec::with_capacity(n);
     if n == 0 {
         return y;
     }
     let t0 = t_s[0];
-    let mut s = stage.steady_state(u_v[0] as f32);
+    let mut s = stage.steady_state_after(history_v, u_v[0] as f32);
     let mut last = s.signals().measured_v;
     // Steps taken so far; step k ends at t0 + k T.
     let mut k: u64 = 0;

@@ -25,7 +25,7 @@ use crate::identify::hysteresis::{ForcProtocol, forc_protocol};
 use crate::io::checks::{self, within};
 use crate::io::csv::Record;
 use crate::io::model_file::ModelFile;
-use crate::sim::open_loop::simulate;
+use crate::sim::open_loop::simulate_after;
 use anyhow::{bail, ensure};
 use rand::{Rng, SeedableRng};
 use std::f64::consts::PI;
@@ -214,6 +214,6 @@ pub fn synth(a: &SynthSpec) -> anyhow::Result<Record> {
         checks::stage_steps(span_s, model.period_s),
         checks::max_stage_steps(),
     )?;
-    let y = simulate(&stage, model.period_s, &t_s, &u_v);
+    let y = simulate_after(&stage, model.period_s, &model.start_history_v(), &t_s, &u_v);
     Ok(Record::new(t_s, u_v, Some(y), None)?)
 }

@@ -6,7 +6,7 @@ use clap::Args;
 use host_tests::io::checks;
 use host_tests::io::csv::Record;
 use host_tests::io::model_file::ModelFile;
-use host_tests::sim::open_loop::simulate;
+use host_tests::sim::open_loop::simulate_after;
 use std::path::{Path, PathBuf};
 
 /// Arguments of `piezo simulate`.
@@ -46,7 +46,13 @@ pub fn run(a: &SimulateArgs) -> anyhow::Result<()> {
         checks::stage_steps(span_s, model.period_s),
         checks::max_stage_steps(),
     )?;
-    let y = simulate(&stage, model.period_s, &rec.t_s, &rec.u_v);
+    let y = simulate_after(
+        &stage,
+        model.period_s,
+        &model.start_history_v(),
+        &rec.t_s,
+        &rec.u_v,
+    );
     let out = Record::new(rec.t_s, rec.u_v, Some(y), None)
         .context("the simulated output is out of range (the model's response diverges)")?;
     out.write(&a.output)?;

@@ -1,0 +1,196 @@
+//! The hysteresis start memory (issue #12, item 2): a stage at rest after earlier motion is not
+//! on its major rising curve, and a record that starts there shows it until the input wipes
+//! that memory out. Without a model of it the fit of a single 1 Hz sine puts most of its
+//! residual in the first second and names `drift` to mop it up.
+//!
+//! # How it is found
+//! The start memory is a short list of turning points ([`super::everett::start_candidates`]:
+//! none, came down from above, came down from the top and back up, a decaying oscillation).
+//! Once `hysteresis` is fitted, each candidate is tried on the fitted model where it matters:
+//! each record is simulated only up to the sample where the candidate's memory and the present
+//! one agree again (the input has wiped the difference out; plus [`START_SETTLE_S`] for the
+//! plant to forget it), and the candidate that lowers the residual power there the most is
+//! taken. The hysteresis basis is then recomputed from that memory and the slow effects
+//! refitted with it; the result is kept only if every record's residual is no worse and the
+//! total is lower. Two rounds (the refitted table can prefer another start).
+//!
+//! # What it trades
+//! One start memory for all records (the records of one session start from the same rest, as
+//! the identification protocol asks); a handful of candidates instead of a free memory (a
+//! free Preisach boundary would be as many parameters as the table has and could mop up any
+//! first-second residual: the candidates are the states a lab's stage is left in).
+
+use super::catalogue::{self, SLOW};
+use super::data::{Data, mse, sim};
+use super::everett::start_candidates;
+use super::slow_fit::{SlowRegressors, fit_slow, slow_regressors};
+use crate::io::model_file::ModelFile;
+use crate::util::par_map;
+use model_core::hysteresis::{HysteresisMemory, HysteresisTable};
+
+/// Time the plant and drift are given to forget a different start after the hysteresis
+/// memories agree again, seconds (our assumption: the thesis' plant settles in about 1 ms and
+/// the fast drift lag is 2.5 ms or more; 50 ms covers the slow tail of what a start moves
+/// without simulating the whole record for each candidate).
+pub const START_SETTLE_S: f64 = 0.05;
+
+/// Rounds of start search and refit.
+const START_ROUNDS: usize = 2;
+
+/// The result of a start search: the new regressors, model, simulations and mean squares.
+pub struct StartFit {
+    pub slow_x: SlowRegressors,
+    pub model: ModelFile,
+    pub sims: Vec<Vec<f64>>,
+    pub mse: Vec<f64>,
+}
+
+/// First sample of `u_v` from which a table driven from memory `a` and from memory `b` agree
+/// (same turning points): the record's length if they never do.
+fn agree_from(
+    t: &HysteresisTable,
+    u_v: &[f64],
+    mut a: HysteresisMemory,
+    mut b: HysteresisMemory,
+) -> usize {
+    for (i, &u) in u_v.iter().enumerate() {
+        if a.turning_points_v().eq(b.turning_points_v())
+            && (a.output_v() - b.output_v()).abs() < 1e-6
+        {
+            return i;
+        }
+        t.forward(&mut a, u as f32);
+        t.forward(&mut b, u as f32);
+    }
+    u_v.len()
+}
+
+/// The first `k` samples of `d`.
+fn head(d: &Data, k: usize) -> Data {
+    Data {
+        name: d.name.clone(),
+        t_s: d.t_s[..k].to_vec(),
+        u_v: d.u_v[..k].to_vec(),
+        y_v: d.y_v[..k].to_vec(),
+    }
+}
+
+/// `model` with its slow effects refitted on `slow_x`.
+fn refit(
+    model: &ModelFile,
+    data: &[Data],
+    slow_x: &SlowRegressors,
+    u_range: (f64, f64),
+) -> Option<ModelFile> {
+    let set: Vec<&str> = SLOW
+        .iter()
+        .copied()
+        .filter(|e| catalogue::present(model, e))
+        .collect();
+    let b0 = catalogue::without_slow(model);
+    let y0: Vec<Vec<f64>> = data
+        .iter()
+        .map(|d| sim(&b0, d).ok())
+        .collect::<Option<_>>()?;
+    let p = fit_slow(data, &y0, slow_x, &set, u_range)?;
+    catalogue::with_slow(model, &p, u_range)
+}
+
+/// The best start memory for the fitted `model` (which has a `[hysteresis]` table fitted on
+/// `slow_x`), with the slow effects refitted on it; `None` if no candidate does better than
+/// the present start.
+pub fn search(
+    model: &ModelFile,
+    data: &[Data],
+    slow_x: &SlowRegressors,
+    u_range: (f64, f64),
+    cur_mse: &[f64],
+) -> Option<StartFit> {
+    let mut best: Option<StartFit> = None;
+    let mut model = model.clone();
+    let mut x_start: Vec<f64> = slow_x.start_v().to_vec();
+    let mut ms_now: Vec<f64> = cur_mse.to_vec();
+    for _ in 0..START_ROUNDS {
+        let sec = model.hysteresis.as_ref()?;
+        let table = sec.table().ok()?;
+        let now: Vec<f32> = sec.start_history_v();
+        let sims_now: Vec<Vec<f64>> = par_map(data, |d| sim(&model, d).ok())
+            .into_iter()
+            .collect::<Option<_>>()?;
+        let cands: Vec<Vec<f64>> = start_candidates(data[0].u_v[0], slow_x.range())
+            .into_iter()
+            .filter(|c| *c != x_start)
+            .collect();
+        // Residual power change over each record's affected head, per candidate.
+        let gains = par_map(&cands, |c| -> Option<f64> {
+            let hist: Vec<f32> = c.iter().map(|&v| v as f32).collect();
+            let mut m = model.clone();
+            if let Some(h) = m.hysteresis.as_mut() {
+                h.start_turns_v = (!c.is_empty()).then(|| c.clone());
+            }
+            let mut delta = 0.0;
+            for (r, (d, s_now)) in data.iter().zip(&sims_now).enumerate() {
+                let mut a = HysteresisMemory::new();
+                a.reset_after(&table, &hist, d.u_v[0] as f32);
+                let mut b = HysteresisMemory::new();
+                b.reset_after(&table, &now, d.u_v[0] as f32);
+                let k = agree_from(&table, &d.u_v, a, b);
+                let k = (k + (START_SETTLE_S / d.period_s()).ceil() as usize).min(d.len());
+                if k == 0 {
+                    continue;
+                }
+                let h = head(d, k);
+                let y = sim(&m, &h).ok()?;
+                let e_new: f64 = h.y_v.iter().zip(&y).map(|(a, b)| (a - b).powi(2)).sum();
+                let e_now: f64 = h
+                    .y_v
+                    .iter()
+                    .zip(&s_now[..k])
+                    .map(|(a, b)| (a - b).powi(2))
+                    .sum();
+                // Records weigh by their own residual power, as the selection's score does.
+                delta += (e_new - e_now) / (d.len() as f64 * ms_now[r].max(1e-14));
+            }
+            Some(delta)
+        });
+        let Some((c, _)) = cands
+            .iter()
+            .zip(gains)
+            .filter_map(|(c, g)| Some((c, g?)))
+            .filter(|(_, g)| *g < 0.0)
+            .min_by(|a, b| a.1.total_cmp(&b.1))
+        else {
+            break;
+        };
+        let x2 = slow_regressors(data, c);
+        let mut m2 = model.clone();
+        if let Some(h) = m2.hysteresis.as_mut() {
+            h.start_turns_v = (!c.is_empty()).then(|| c.clone());
+        }
+        let Some(m2) = refit(&m2, data, &x2, u_range) else {
+            break;
+        };
+        let sims: Vec<Vec<f64>> = par_map(data, |d| sim(&m2, d).ok())
+            .into_iter()
+            .collect::<Option<_>>()?;
+        let ms: Vec<f64> = data
+            .iter()
+            .zip(&sims)
+            .map(|(d, y)| mse(&d.y_v, y))
+            .collect();
+        let no_worse = ms.iter().zip(&ms_now).all(|(a, b)| *a <= *b * 1.000_001);
+        if !no_worse || ms.iter().sum::<f64>() >= ms_now.iter().sum::<f64>() {
+            break;
+        }
+        x_start = c.clone();
+        model = m2.clone();
+        ms_now = ms.clone();
+        best = Some(StartFit {
+            slow_x: x2,
+            model: m2,
+            sims,
+            mse: ms,
+        });
+    }
+    best
+}
