@@ -918,3 +918,71 @@ fn gap_verb_on_a_clean_record_exits_0_with_unexplained_null() {
     assert!(j["final_rms_v"].as_f64().is_some_and(f64::is_finite));
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// Issue #12 item 1: without holds, a drift and a hysteresis loop both shape a slow periodic
+/// residual, so the workflow fits the other in the named one's place and says when it cannot
+/// tell them apart ([`gap::CannotTell`], `"cannot_tell"` in the JSON). On one 20 s, 0.2 Hz sine
+/// at 1 kHz the two are told apart both ways, so no note may be given: a drift lag (0.8 s, 8 %
+/// of the step; measured 1.00 mV, the floor, against 16.9 mV for hysteresis and a sensor gain
+/// in its place) is named `drift` alone, and a Bouc-Wen loop (measured 1.09 mV against
+/// 115 mV for a drift in its place) `hysteresis` alone. (The note is for records where both
+/// forms miss alike, as on a real stage whose creep and loop are neither form.)
+#[test]
+fn single_sine_tells_drift_from_hysteresis() {
+    let base = ModelFile::built_in("thesis-linear").unwrap();
+    let rate_hz = 1_000.0;
+    let t: Vec<f64> = (0..(20.0 * rate_hz) as usize)
+        .map(|i| i as f64 / rate_hz)
+        .collect();
+    let u: Vec<f64> = t
+        .iter()
+        .map(|&x| 5.0 - 4.0 * (2.0 * std::f64::consts::PI * 0.2 * x).cos())
+        .collect();
+    let mut drift = ModelFile::built_in("thesis-linear").unwrap();
+    drift.converters.noise_v = 1e-3;
+    drift.converters.seed = 31;
+    drift.drift = Some(host_tests::io::model_file::DriftSection {
+        gains: [0.08, 0.0, 0.0],
+        taus_s: [0.8, 10.0, 100.0],
+        poly: [1.0, 0.0, 0.0, 0.0],
+        poly_range_v: [0.0, 10.0],
+    });
+    let bouc_wen = Truth {
+        effects: vec!["hysteresis".into()],
+        creep: None,
+        bouc_wen: Some((0.2, 1.0, 0.2)),
+        gain: None,
+        slew_v_per_s: None,
+        delay_s: None,
+        mode: None,
+        seed: 31,
+    };
+    let cases = [
+        ("drift", drift, u.clone()),
+        (
+            "hysteresis",
+            truth_model(&bouc_wen),
+            predistort(&bouc_wen, &t, &u),
+        ),
+    ];
+    for (effect, model, u_stage) in cases {
+        let stage = model.build_stage().unwrap();
+        let y = simulate(&stage, model.period_s, &t, &u_stage);
+        let rec = Record::new(t.clone(), u.clone(), Some(y), None).unwrap();
+        let d = diagnose(
+            &base,
+            &[Data::from_record("sine.csv", rec).unwrap()],
+            &Options::default(),
+        )
+        .unwrap();
+        println!("{}", d.table());
+        assert_eq!(d.named, [effect]);
+        assert!(d.cannot_tell.is_empty(), "{:?}", d.cannot_tell);
+        assert!(
+            d.to_json()["cannot_tell"]
+                .as_array()
+                .is_some_and(|a| a.is_empty())
+        );
+        assert!(d.final_rms_v < 1.5 * d.noise_floor_v, "{}", d.final_rms_v);
+    }
+}
