@@ -71,6 +71,14 @@ const _: () = {
     assert!(HEARTBEAT_TICKS_PER_TOGGLE >= 1);
 };
 
+// ----- Loop delay. -----
+/// Samples of computational delay the board adds to the loop: the interrupt sends, first
+/// thing, the code computed in the previous sample (`hw/control.rs`, issue 13 item 6), so a
+/// reading acts on the amplifier one period later than in the thesis' identification loop,
+/// whose 85 us (eq. 4.4) the plant model carries. The pre-filter's model of the loop delay
+/// adds these samples ([`crate::settings::Settings::controller_config`]).
+pub const COMPUTATIONAL_DELAY_SAMPLES: u32 = 1;
+
 // ----- External DAC. -----
 /// SPI clock of the external DAC, Hz (DAC8311 allows 50 MHz, AD5641 30 MHz; our choice leaves
 /// margin for wiring): a 16-bit frame takes 1.3 us.

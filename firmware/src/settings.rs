@@ -18,10 +18,12 @@ use model_core::controller::{Controller, ControllerConfig, ReferenceSource};
 use model_core::lag::LagConfig;
 use model_core::limits::ConfigError;
 use model_core::params;
+use model_core::plant::LinearPlantConfig;
 use model_core::prefilter::PreFilterConfig;
 use model_core::reference::{ReferenceConfig, Shape};
 
 use crate::command::ReferenceRequest;
+use crate::design_parameters;
 use crate::scaling::AdcCalibration;
 
 /// What the command task keeps.
@@ -137,6 +139,13 @@ impl Settings {
                 kc: self.kc,
                 period_s,
                 ..LagConfig::default()
+            },
+            // The loop's delay as the board has it: the plant's (eq. 4.4) plus the DAC's
+            // sample of computational delay, which the pre-filter's preview covers.
+            plant: LinearPlantConfig {
+                delay_s: base.plant.delay_s
+                    + f64::from(design_parameters::COMPUTATIONAL_DELAY_SAMPLES) * period_s,
+                ..base.plant
             },
             prefilter: PreFilterConfig {
                 tau_s: self.tau_s,
