@@ -17,14 +17,32 @@ pub const PACKAGE: &str = "piezo-qemu";
 /// loaded CI machine.
 pub const RUN_TIMEOUT: Duration = Duration::from_secs(120);
 
-/// [`RUN_TIMEOUT`] or `$PIEZO_QEMU_TIMEOUT_S` (seconds, may be fractional).
-pub fn run_timeout() -> Duration {
-    std::env::var("PIEZO_QEMU_TIMEOUT_S")
-        .ok()
-        .and_then(|s| s.parse::<f64>().ok())
-        .filter(|s| s.is_finite() && *s > 0.0)
-        .map(Duration::from_secs_f64)
-        .unwrap_or(RUN_TIMEOUT)
+/// Longest timeout `PIEZO_QEMU_TIMEOUT_S` may ask for, seconds (our assumption: a day; a
+/// run that needs more is hung).
+pub const MAX_RUN_TIMEOUT_S: f64 = 86_400.0;
+
+/// [`RUN_TIMEOUT`] or `$PIEZO_QEMU_TIMEOUT_S` (seconds, may be fractional, in
+/// (0, [`MAX_RUN_TIMEOUT_S`]]); a value that is not such a number is an error that says so.
+pub fn run_timeout() -> Result<Duration> {
+    match std::env::var("PIEZO_QEMU_TIMEOUT_S") {
+        Err(_) => Ok(RUN_TIMEOUT),
+        Ok(text) => timeout_from(&text),
+    }
+}
+
+/// The timeout `PIEZO_QEMU_TIMEOUT_S=text` asks for.
+fn timeout_from(text: &str) -> Result<Duration> {
+    let s: f64 = text
+        .trim()
+        .parse()
+        .map_err(|_| anyhow::anyhow!("PIEZO_QEMU_TIMEOUT_S=`{text}` is not a number of seconds"))?;
+    if !(s > 0.0 && s <= MAX_RUN_TIMEOUT_S) {
+        bail!(
+            "PIEZO_QEMU_TIMEOUT_S={text} is outside (0, {MAX_RUN_TIMEOUT_S}] seconds; unset it for the default {} s",
+            RUN_TIMEOUT.as_secs()
+        );
+    }
+    Ok(Duration::from_secs_f64(s))
 }
 
 /// How to install what the runs need, for error messages.
@@ -220,7 +238,7 @@ impl RunOutput {
 /// Run `elf` on `machine` under the timeout, decode its defmt output.
 pub fn run_image(machine: Machine, elf: &Path) -> Result<RunOutput> {
     check_tools()?;
-    let timeout = run_timeout();
+    let timeout = run_timeout()?;
     let start = Instant::now();
     let mut qemu = Command::new("qemu-system-arm")
         .args([
@@ -329,4 +347,35 @@ pub fn on_target_tests(machine: Machine) -> Result<TestRun> {
         );
     }
     Ok(TestRun { passed, output })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Every value of `PIEZO_QEMU_TIMEOUT_S` is answered: a time in range is taken, anything
+    /// else (not a number, zero, negative, NaN, infinite, 1e308 that `Duration` cannot hold)
+    /// is an error naming the variable, never a panic.
+    #[test]
+    fn timeout_variable_is_checked() {
+        assert_eq!(timeout_from("2.5").unwrap(), Duration::from_millis(2500));
+        assert_eq!(
+            timeout_from(" 86400 ").unwrap(),
+            Duration::from_secs(86_400)
+        );
+        for bad in [
+            "",
+            "abc",
+            "0",
+            "-1",
+            "nan",
+            "inf",
+            "1e308",
+            "86400.5",
+            "18446744073709551616",
+        ] {
+            let e = timeout_from(bad).expect_err(bad).to_string();
+            assert!(e.contains("PIEZO_QEMU_TIMEOUT_S"), "{bad}: {e}");
+        }
+    }
 }
