@@ -717,9 +717,9 @@ fn prune_bar(unit: &[String]) -> f64 {
                 .sum::<f64>()
 }
 
-/// `m` with its slow effects, and those of `extra` it lacks, fitted afresh together to the residual of
-/// `m` without slow effects; `m` itself if it has none and no `extra`.
-fn refit_slow(
+/// `m` with its slow effects, and those of `extra` it lacks, fitted afresh together to the
+/// residual of `m` without slow effects; `m` itself if it has none and no `extra`.
+pub(super) fn refit_slow(
     m: &ModelFile,
     extra: &[&str],
     data: &[Data],

@@ -20,10 +20,10 @@
 //! free Preisach boundary would be as many parameters as the table has and could mop up any
 //! first-second residual: the candidates are the states a lab's stage is left in).
 
-use super::catalogue::{self, SLOW};
 use super::data::{Data, mse, sim};
 use super::everett::start_candidates;
-use super::slow_fit::{SlowRegressors, fit_slow, slow_regressors};
+use super::select::refit_slow;
+use super::slow_fit::{SlowRegressors, slow_regressors};
 use crate::io::model_file::ModelFile;
 use crate::util::par_map;
 use model_core::hysteresis::{HysteresisMemory, HysteresisTable};
@@ -73,27 +73,6 @@ fn head(d: &Data, k: usize) -> Data {
         u_v: d.u_v[..k].to_vec(),
         y_v: d.y_v[..k].to_vec(),
     }
-}
-
-/// `model` with its slow effects refitted on `slow_x`.
-fn refit(
-    model: &ModelFile,
-    data: &[Data],
-    slow_x: &SlowRegressors,
-    u_range: (f64, f64),
-) -> Option<ModelFile> {
-    let set: Vec<&str> = SLOW
-        .iter()
-        .copied()
-        .filter(|e| catalogue::present(model, e))
-        .collect();
-    let b0 = catalogue::without_slow(model);
-    let y0: Vec<Vec<f64>> = data
-        .iter()
-        .map(|d| sim(&b0, d).ok())
-        .collect::<Option<_>>()?;
-    let p = fit_slow(data, &y0, slow_x, &set, u_range)?;
-    catalogue::with_slow(model, &p, u_range)
 }
 
 /// The best start memory for the fitted `model` (which has a `[hysteresis]` table fitted on
@@ -167,7 +146,7 @@ pub fn search(
         if let Some(h) = m2.hysteresis.as_mut() {
             h.start_turns_v = (!c.is_empty()).then(|| c.clone());
         }
-        let Some(m2) = refit(&m2, data, &x2, u_range) else {
+        let Some(m2) = refit_slow(&m2, &[], data, &x2, u_range) else {
             break;
         };
         let sims: Vec<Vec<f64>> = par_map(data, |d| sim(&m2, d).ok())
