@@ -1087,10 +1087,7 @@ fn the_pre_filter_covers_the_boards_computational_delay() {
         spec.lag = board.lag;
         spec.plant = plant;
         spec.stage.delay_s += extra_s;
-        let r = simulate(&spec, true).unwrap();
-        let top = r.trace.iter().map(|s| s.2).fold(f64::MIN, f64::max);
-        let bottom = r.trace.iter().map(|s| s.2).fold(f64::MAX, f64::min);
-        ((top - 7.0).max(1.0 - bottom) / 6.0 * 100.0).max(0.0)
+        simulate(&spec, true).unwrap().overshoot_pct(1.0, 7.0)
     };
     let with = overshoot(board.plant);
     let blind = overshoot(model_core::plant::LinearPlantConfig::default());

@@ -183,9 +183,6 @@ fn run_case(kind: &[&str], seed: u64, slow_s: f64) -> Outcome {
     let _ = std::fs::remove_dir_all(&dir);
     if std::env::var("GAP_DEBUG").is_ok() {
         println!("seed {seed} truth {tr:?}\n{}", d.table());
-        for (i, t) in d.tried.iter().enumerate() {
-            println!("  tried at step {}: {t:?}", i + 1);
-        }
         for (r, rec) in data.iter().enumerate() {
             let y = gap::sim(&d.model, rec).unwrap();
             let (mut e_edge, mut n_edge, mut e_set, mut n_set) = (0.0, 0, 0.0, 0);
@@ -212,20 +209,7 @@ fn run_case(kind: &[&str], seed: u64, slow_s: f64) -> Outcome {
                 1e3 * (e_set / n_set.max(1) as f64).sqrt()
             );
         }
-        for s in &d.steps {
-            println!(
-                "  {} per record (fast, slow) mV: {:.2?} -> {:.2?}",
-                s.effect,
-                s.record_rms_before_v
-                    .iter()
-                    .map(|v| v * 1e3)
-                    .collect::<Vec<_>>(),
-                s.record_rms_after_v
-                    .iter()
-                    .map(|v| v * 1e3)
-                    .collect::<Vec<_>>()
-            );
-        }
+        print!("{}", d.trace());
     }
     // Each correctly named effect: its step cuts the residual >= 5x, or brings it within 1.5x
     // of the noise floor, or (in a pair) removing it from the final model raises the residual

@@ -254,24 +254,7 @@ fn run_case(seed: u64) -> Outcome {
             case.describe(),
             d.table()
         );
-        for (i, t) in d.tried.iter().enumerate() {
-            println!("  tried at step {}: {t:?}", i + 1);
-        }
-        for s in &d.steps {
-            println!(
-                "  {}{} per record mV: {:.2?} -> {:.2?}",
-                s.effect,
-                if s.removed { " (removed)" } else { "" },
-                s.record_rms_before_v
-                    .iter()
-                    .map(|v| v * 1e3)
-                    .collect::<Vec<_>>(),
-                s.record_rms_after_v
-                    .iter()
-                    .map(|v| v * 1e3)
-                    .collect::<Vec<_>>()
-            );
-        }
+        print!("{}", d.trace());
     }
     let mut named = d.named.clone();
     named.sort();

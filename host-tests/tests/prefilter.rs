@@ -172,10 +172,7 @@ fn step_response_overshoot_is_below_two_percent() {
         for mode in [PreFilterMode::Off, PreFilterMode::Full] {
             let spec = TrackSpec::new(TrackShape::Step, 20.0, amp, offset, mode);
             let r = simulate(&spec, true).unwrap();
-            let (hi, lo) = (offset + amp, offset - amp);
-            let top = r.trace.iter().map(|s| s.2).fold(f64::MIN, f64::max);
-            let bottom = r.trace.iter().map(|s| s.2).fold(f64::MAX, f64::min);
-            let over = ((top - hi).max(lo - bottom) / (2.0 * amp) * 100.0).max(0.0);
+            let over = r.overshoot_pct(offset - amp, offset + amp);
             println!(
                 "{:.0} V steps, pre-filter {mode:?}: overshoot {over:.2} %, command {:.2}..{:.2} V, slew {:.1} V/ms",
                 2.0 * amp,

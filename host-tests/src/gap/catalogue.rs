@@ -338,13 +338,5 @@ pub fn with_slow(m: &ModelFile, p: &SlowParams, u_range: (f64, f64)) -> Option<M
     if let Some(offset_v) = p.offset_v {
         m.offset = Some(OffsetSection { offset_v });
     }
-    match m.build_stage() {
-        Ok(_) => Some(m),
-        Err(e) => {
-            if std::env::var("GAP_DEBUG").is_ok() {
-                eprintln!("with_slow rejected: {e:#}");
-            }
-            None
-        }
-    }
+    m.build_stage().ok().map(|_| m)
 }

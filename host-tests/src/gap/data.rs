@@ -112,22 +112,29 @@ impl Data {
         count
     }
 
-    /// Does the record hold its input constant for [`super::constants::HOLD_MIN_S`] at least
-    /// somewhere (where a drift shows as a tail and a hysteresis loop does not)?
-    pub fn has_hold(&self) -> bool {
-        let min = (super::constants::HOLD_MIN_S / self.period_s()).ceil() as usize;
-        let mut run = 1usize;
-        for w in self.u_v.windows(2) {
-            if (w[1] - w[0]).abs() <= 1e-9 {
-                run += 1;
-                if run >= min {
-                    return true;
-                }
-            } else {
-                run = 1;
+    /// The holds of the record: runs of constant input (within 1 nV) of at least
+    /// [`super::constants::HOLD_MIN_S`], as `start..end` sample ranges (where a drift shows
+    /// as a tail and a hysteresis loop does not).
+    pub fn holds(&self) -> Vec<std::ops::Range<usize>> {
+        let (n, t) = (self.len(), self.period_s());
+        let mut out = Vec::new();
+        let mut i = 1;
+        while i < n {
+            let start = i;
+            while i < n && (self.u_v[i] - self.u_v[start]).abs() <= 1e-9 {
+                i += 1;
             }
+            if (i - start) as f64 * t >= super::constants::HOLD_MIN_S {
+                out.push(start..i);
+            }
+            i += 1;
         }
-        false
+        out
+    }
+
+    /// Does the record have a hold ([`Self::holds`])?
+    pub fn has_hold(&self) -> bool {
+        !self.holds().is_empty()
     }
 
     /// Never empty (checked on construction).

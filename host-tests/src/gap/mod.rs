@@ -38,7 +38,8 @@
 //! * [`catalogue`]: the effects, how each sits in the model file, its bounds;
 //! * [`fast_fit`] and [`slow_fit`] (with [`nnls`], the sign-constrained solve): the fits of
 //!   step 4;
-//! * [`polish`]: the play radii refined continuously once hysteresis is named;
+//! * [`everett`]: the hysteresis form, weights on a basis that is the model-core Everett
+//!   table's own response; [`start`]: the table's memory at the start of the records;
 //! * [`select`]: the greedy driver: candidates, scores, selection, the final check (steps 4-6);
 //! * [`report`]: the table and the HTML report of a [`Diagnosis`]; [`unexplained`]: what is
 //!   left above twice the floor and where (never silent);
@@ -52,7 +53,6 @@ pub mod demo;
 pub mod everett;
 pub mod fast_fit;
 pub mod nnls;
-pub mod polish;
 pub mod protocol;
 pub mod report;
 pub mod select;

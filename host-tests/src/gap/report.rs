@@ -84,6 +84,27 @@ impl Diagnosis {
         }
         s
     }
+
+    /// The workings behind the table, for debugging a diagnosis: every candidate tried at
+    /// each step (effect, score, explained fraction, admissible), then each step's residual
+    /// per record, mV.
+    pub fn trace(&self) -> String {
+        let mut s = String::new();
+        for (i, t) in self.tried.iter().enumerate() {
+            s.push_str(&format!("  tried at step {}: {t:?}\n", i + 1));
+        }
+        let mv = |v: &[f64]| v.iter().map(|x| x * 1e3).collect::<Vec<_>>();
+        for st in &self.steps {
+            s.push_str(&format!(
+                "  {}{} per record mV: {:.2?} -> {:.2?}\n",
+                st.effect,
+                if st.removed { " (removed)" } else { "" },
+                mv(&st.record_rms_before_v),
+                mv(&st.record_rms_after_v)
+            ));
+        }
+        s
+    }
 }
 
 fn fmt_num(v: f64) -> String {

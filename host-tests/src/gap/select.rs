@@ -11,7 +11,6 @@ use super::constants::{
 };
 use super::data::{Data, min_max, mse, noise_floor, sim};
 use super::fast_fit::fit_fast;
-use super::polish::refine_play_radii;
 use super::signatures;
 use super::slow_fit::{SlowRegressors, fit_slow, slow_regressors};
 use super::start;
@@ -155,13 +154,6 @@ fn cannot_tell(
                 .iter()
                 .map(|d| sim(&m, d).ok().map(|s| mse(&d.y_v, &s)))
                 .collect::<Option<_>>()?;
-            if std::env::var("GAP_DEBUG").is_ok() {
-                eprintln!(
-                    "cannot-tell trial: {f} in place of {e}: {:.3} mV against {:.3} mV",
-                    1e3 * rms(&ms),
-                    1e3 * rms(cur_mse)
-                );
-            }
             let r2 = CANNOT_TELL_RATIO * CANNOT_TELL_RATIO;
             let near = ms.iter().zip(cur_mse).all(|(a, b)| *a <= r2 * *b);
             near.then(|| CannotTell {
@@ -444,18 +436,18 @@ pub fn diagnose(base: &ModelFile, data: &[Data], opts: &Options) -> anyhow::Resu
                 };
                 (e, m, s, ms, ratio)
             })
-            // The effect furthest below its own bar.
             // Among the units below their bars, the largest first (two effects explained by
             // the others are removed before one: fewer names for the same evidence), then
             // the one furthest below its bar.
             .min_by(|a, b| {
-                let below = |x: &(Vec<String>, ModelFile, Vec<Vec<f64>>, Vec<f64>, f64)| {
-                    x.4 < prune_bar(&x.0)
+                // (units below their bar first, larger units first, then ratio to the bar)
+                let key = |unit: &[String], ratio: f64| {
+                    let bar = prune_bar(unit);
+                    let size = if ratio < bar { unit.len() } else { 0 };
+                    (std::cmp::Reverse(size), ratio / bar)
                 };
-                below(b)
-                    .cmp(&below(a))
-                    .then((below(b) as usize * b.0.len()).cmp(&(below(a) as usize * a.0.len())))
-                    .then((a.4 / prune_bar(&a.0)).total_cmp(&(b.4 / prune_bar(&b.0))))
+                let (ka, kb) = (key(&a.0, a.4), key(&b.0, b.4));
+                ka.0.cmp(&kb.0).then(ka.1.total_cmp(&kb.1))
             });
         let Some((unit, m, s, ms, ratio)) = weakest else {
             break;
@@ -492,18 +484,6 @@ pub fn diagnose(base: &ModelFile, data: &[Data], opts: &Options) -> anyhow::Resu
         sims = s;
         cur_mse = ms;
     }
-    // The play radii, refined continuously, if hysteresis is named and the floor not reached;
-    // kept only if the full simulation agrees (every record's residual power no larger, the
-    // total smaller).
-    polish_step(
-        &named,
-        data,
-        &var,
-        &mut model,
-        &mut sims,
-        &mut cur_mse,
-        &mut steps,
-    );
     // Swaps (after the radii are refined, and each trial refined the same way): a slow effect
     // the greedy pass named first can stand in for another the records
     // cannot tell from it (without holds, a drift lag's mean over a sine acts as an offset);
@@ -544,13 +524,6 @@ pub fn diagnose(base: &ModelFile, data: &[Data], opts: &Options) -> anyhow::Resu
                     .map(|d| sim(&m, d).ok())
                     .collect::<Option<_>>()?;
                 let ms: Vec<f64> = data.iter().zip(&s).map(|(d, y)| mse(&d.y_v, y)).collect();
-                // Compared as the present model is: with its play radii refined.
-                if m.hysteresis_play.is_some()
-                    && let Some((m2, s2, ms2)) = polish_play(&m, data)
-                    && ms2.iter().sum::<f64>() < ms.iter().sum::<f64>()
-                {
-                    return Some((m2, s2, ms2));
-                }
                 Some((m, s, ms))
             },
         );
@@ -599,16 +572,6 @@ pub fn diagnose(base: &ModelFile, data: &[Data], opts: &Options) -> anyhow::Resu
             cur_mse = ms;
         }
     }
-    // ... and again after a swap.
-    polish_step(
-        &named,
-        data,
-        &var,
-        &mut model,
-        &mut sims,
-        &mut cur_mse,
-        &mut steps,
-    );
     let cannot_tell = cannot_tell(&model, base, &named, data, &slow_x, u_range, &cur_mse);
     let unexplained = locate(data, &sims, &noise);
     if let Some(b) = &bar {
@@ -631,70 +594,6 @@ pub fn diagnose(base: &ModelFile, data: &[Data], opts: &Options) -> anyhow::Resu
     })
 }
 
-/// One refinement of the play radii ([`polish_play`]), recorded as a refit step if it helps.
-#[allow(clippy::too_many_arguments)]
-fn polish_step(
-    named: &[String],
-    data: &[Data],
-    var: &[f64],
-    model: &mut ModelFile,
-    sims: &mut Vec<Vec<f64>>,
-    cur_mse: &mut Vec<f64>,
-    steps: &mut Vec<Step>,
-) {
-    if !at_floor_now(cur_mse, var)
-        && named.iter().any(|e| e == "hysteresis")
-        && let Some(polished) = polish_play(model, data)
-    {
-        let (m, s, ms) = polished;
-        let better = ms.iter().zip(cur_mse.iter()).all(|(a, b)| *a <= *b * 1.001)
-            && ms.iter().sum::<f64>() < 0.98 * cur_mse.iter().sum::<f64>();
-        if better {
-            let rms = |v: &[f64]| (v.iter().sum::<f64>() / v.len() as f64).sqrt();
-            let mut params = serde_json::Map::new();
-            for (k, v) in catalogue::params_of(&m, "hysteresis") {
-                params.insert(k, serde_json::json!(v));
-            }
-            steps.push(Step {
-                effect: "hysteresis".into(),
-                evidence: "play radii refined continuously (variable projection, weights >= 0)"
-                    .into(),
-                params,
-                rms_before_v: rms(cur_mse),
-                rms_after_v: rms(&ms),
-                record_rms_before_v: cur_mse.iter().map(|m| m.sqrt()).collect(),
-                record_rms_after_v: ms.iter().map(|m| m.sqrt()).collect(),
-                sims: s.clone(),
-                refit: true,
-                removed: false,
-            });
-            *model = m;
-            *sims = s;
-            *cur_mse = ms;
-        }
-    }
-}
-
-/// `model` with its play radii refined ([`refine_play_radii`]), its simulations and mean
-/// squares.
-fn polish_play(model: &ModelFile, data: &[Data]) -> Option<Trial3> {
-    let mut m0 = model.clone();
-    m0.hysteresis_play = None;
-    let residual: Vec<Vec<f64>> = par_map(data, |d| {
-        sim(&m0, d)
-            .ok()
-            .map(|s| d.y_v.iter().zip(&s).map(|(y, x)| y - x).collect())
-    })
-    .into_iter()
-    .collect::<Option<_>>()?;
-    let m = refine_play_radii(model, data, &residual)?;
-    let s: Vec<Vec<f64>> = par_map(data, |d| sim(&m, d).ok())
-        .into_iter()
-        .collect::<Option<_>>()?;
-    let ms = data.iter().zip(&s).map(|(d, y)| mse(&d.y_v, y)).collect();
-    Some((m, s, ms))
-}
-
 /// Is every record within [`STOP_FLOOR_RATIO`] of its noise floor?
 fn at_floor_now(cur_mse: &[f64], var: &[f64]) -> bool {
     cur_mse
@@ -702,9 +601,6 @@ fn at_floor_now(cur_mse: &[f64], var: &[f64]) -> bool {
         .zip(var)
         .all(|(m, v)| *m <= STOP_FLOOR_RATIO * STOP_FLOOR_RATIO * v)
 }
-
-/// A model, its simulations and mean squares.
-type Trial3 = (ModelFile, Vec<Vec<f64>>, Vec<f64>);
 
 /// The final check's bar for removing `unit`: the growth of the residual above the floor
 /// that its parameters must earn.

@@ -108,22 +108,14 @@ pub fn compute(data: &[Data], sims: &[Vec<f64>], noise: &[f64]) -> Signatures {
                 s.peak_hz = strongest_line_hz(&s.welch);
             }
         }
-        // Holds: runs of constant input of at least HOLD_MIN_S.
-        let mut i = 1;
-        while i < n {
-            let start = i;
-            while i < n && (d.u_v[i] - d.u_v[start]).abs() <= 1e-9 {
-                i += 1;
-            }
-            let len = i - start;
-            if len as f64 * t >= super::constants::HOLD_MIN_S {
-                let skip = ((0.02 / t).ceil() as usize).min(len / 4);
-                let w = ((len - skip) / 10).max(1);
-                let a = mean(&r[start + skip..start + skip + w]);
-                let b = mean(&r[i - w..i]);
-                s.tail_v = s.tail_v.max((b - a).abs());
-            }
-            i += 1;
+        // Holds: the tail after each step's transient.
+        for h in d.holds() {
+            let len = h.len();
+            let skip = ((0.02 / t).ceil() as usize).min(len / 4);
+            let w = ((len - skip) / 10).max(1);
+            let a = mean(&r[h.start + skip..h.start + skip + w]);
+            let b = mean(&r[h.end - w..h.end]);
+            s.tail_v = s.tail_v.max((b - a).abs());
         }
         // Loop and curve, on slowly moving input (no jumps).
         let bins = 20;

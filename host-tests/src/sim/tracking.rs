@@ -217,6 +217,16 @@ pub struct TrackRun {
 }
 
 impl TrackRun {
+    /// How far the recorded output went beyond `[lo_v, hi_v]` (the levels of a square-wave
+    /// reference), in percent of `hi_v - lo_v`; 0 inside. Needs a run made with `record`.
+    pub fn overshoot_pct(&self, lo_v: f64, hi_v: f64) -> f64 {
+        let top = self.trace.iter().map(|s| s.2).fold(f64::MIN, f64::max);
+        let bottom = self.trace.iter().map(|s| s.2).fold(f64::MAX, f64::min);
+        ((top - hi_v).max(lo_v - bottom) / (hi_v - lo_v) * 100.0).max(0.0)
+    }
+}
+
+impl TrackRun {
     /// What `piezo track --json` prints: the four [`TrackFigures`] keys, and
     /// `learn_rms_error_v` (one value per learning repeat) only when learning ran.
     pub fn json(&self) -> anyhow::Result<serde_json::Value> {
