@@ -3,19 +3,22 @@
 //!
 //! What runs is the firmware's own code: the control interrupt's [`LoopCore::step`] /
 //! [`LoopCore::finish`] (`src/sample.rs`, calling `Controller::step_with_correction`, taking
-//! new configurations from the mailbox in place), the command task's [`App`] (`src/app.rs`:
-//! line assembly, the command handler, `status`, the capture upload as frames, the learning
-//! update), the liveness rule (`src/liveness.rs`) with the supervisor's verdicts, the
+//! new configurations from the mailbox in place), the three tasks' bodies
+//! (`firmware::tasks::{command_task, heartbeat_task, supervisor_task}`, the async functions
+//! `hw/tasks.rs` spawns on the board), polled here as futures once per sample under simulated
+//! time, with the command task's [`App`] (`src/app.rs`: line assembly, the command handler,
+//! `status`, the capture upload as frames, the learning update), the liveness rule
+//! (`src/liveness.rs`) with the supervisor's verdicts, the
 //! settings -> controller path, the boot's reset-record handling and the panic handler's
 //! safe-state sequence (`reset_reason::{take_last_reset, enter_safe_state}`, the functions
 //! `hw/safe_state.rs` calls), the ADC front end model of the README
 //! (`scaling::front_end_pin_v`, open input included) and the default calibration. Around it,
 //! simulated here: the clock (one tick per sample at the loop rate; `rate` re-times it and
-//! the stage), the task schedule (command and heartbeat check in every `TASK_CHECK_IN_S`,
-//! the supervisor runs every `SUPERVISOR_PERIOD_S`, tasks start `BOOT_LOOP_TO_TASKS_S` after
-//! the loop), the serial line at `UART_BAUD` (10 bits a byte, the board's 2048-byte TX
-//! buffer; the command task writes an upload frame only when it fits, and reads the line
-//! between frames), a fake IWDG (reset when not fed for `IWDG_TIMEOUT_S`), the chip's reset
+//! the stage; the tasks' `DelayNs` waits on it), the executor (each task's future is polled
+//! once after each sample, starting `BOOT_LOOP_TO_TASKS_S` after the loop; a stalled task is
+//! one that is no longer polled), the serial line at `UART_BAUD` (10 bits a byte, the board's
+//! 2048-byte TX and 256-byte RX buffers behind embedded-io-async's `Read` / `Write`), the
+//! LEDs (embedded-hal pins), a fake IWDG (reset when not fed for `IWDG_TIMEOUT_S`), the chip's reset
 //! (the output switch opens, RAM is rebuilt except the `.uninit` record, the RCC's IWDG
 //! flag is kept, and after [`STARTUP_S`] the board boots again as `hw/mod.rs` does), the
 //! output switch (closed by the boot sequence), the external DAC (holds its code through a
@@ -25,26 +28,31 @@
 //! record`'s own receiving code (`host_tests::board::record`) fetches a capture over the
 //! simulated line.
 //!
-//! Not here yet (see the issue's closing note): the embassy tasks themselves (the async
-//! bodies in `src/hw/tasks.rs` are thin shells over `App`, but they are not compiled for the
-//! host), the register writes of the panic handler (`hw::safe_state::Registers`: the
+//! Not here (only a board can show them): embassy's executor and its time driver (`hw/tasks.rs`
+//! is one call per task into `firmware::tasks`), the register writes of the panic handler (`hw::safe_state::Registers`: the
 //! sequence's order and effects are tested here, the GPIO/SPI writes only on the board) and
 //! the interrupt's real cycle counts (a host cannot measure them: the 200 kHz swap test shows
 //! the swap is an index swap, asserted by the configuration lying in the mailbox's slot, and
 //! charges it an estimate against the real budget).
 
+use std::cell::{Cell, RefCell};
 use std::collections::VecDeque;
+use std::convert::Infallible;
+use std::future::{Future, poll_fn};
+use std::pin::Pin;
+use std::rc::Rc;
 use std::sync::atomic::{AtomicU32, Ordering};
+use std::task::{Context, Poll, Waker};
 use std::time::Duration;
 
 use firmware::app::{App, Board};
 use firmware::capture::CaptureBuffer;
 use firmware::design_parameters::{
-    BOOT_LOOP_TO_TASKS_S, CAPTURE_RECORDS, IWDG_TIMEOUT_S, SUPERVISOR_PERIOD_S, TASK_CHECK_IN_S,
-    UART_BAUD,
+    BOOT_LOOP_TO_TASKS_S, CAPTURE_RECORDS, HEARTBEAT_HALF_PERIOD_S, IWDG_TIMEOUT_S,
+    SUPERVISOR_PERIOD_S, TASK_CHECK_IN_S, UART_BAUD,
 };
 use firmware::learn::LearnShared;
-use firmware::liveness::{self, Liveness, TASK_COMMAND, TASK_HEARTBEAT, Verdict};
+use firmware::liveness::{Liveness, Verdict};
 use firmware::mailbox::Mailbox;
 use firmware::reset_reason::{
     ResetReason, ResetRecord, SafeStateOutputs, enter_safe_state, take_last_reset,
@@ -53,6 +61,7 @@ use firmware::sample::{Links, LoopCore, Requests, Status};
 use firmware::scaling::{self, TimerSetting};
 use firmware::settings::{LoopConfig, Settings};
 use firmware::stats::{CycleStats, SharedStats};
+use firmware::tasks::{self, Watchdog};
 use host_tests::board::{Link, Options, record};
 use model_core::closed_loop::{FullStage, StageModel};
 use model_core::controller::{ControllerState, Faults};
@@ -102,10 +111,164 @@ enum Sensor {
     Loopback,
 }
 
+/// Simulated time, nanoseconds since power-on: set by the board before it polls the tasks.
+#[derive(Clone, Default)]
+struct Clock(Rc<Cell<u64>>);
+
+impl Clock {
+    fn now_ns(&self) -> u64 {
+        self.0.get()
+    }
+}
+
+/// The tasks' delay: ready once simulated time has passed the deadline.
+struct SimDelay(Clock);
+
+impl embedded_hal_async::delay::DelayNs for SimDelay {
+    async fn delay_ns(&mut self, ns: u32) {
+        let end = self.0.now_ns() + u64::from(ns);
+        poll_fn(|_| {
+            if self.0.now_ns() >= end {
+                Poll::Ready(())
+            } else {
+                Poll::Pending
+            }
+        })
+        .await
+    }
+}
+
+/// The UART's buffers: the firmware writes into `tx`, the line drains it at the baud rate;
+/// the host's bytes land in `rx` (dropped and counted when it is full, as the board's
+/// ring buffer overruns).
+#[derive(Default)]
+struct Line {
+    rx: VecDeque<u8>,
+    tx: VecDeque<u8>,
+    rx_overflow: u32,
+}
+
+/// The command task's side of the line, as embassy's `BufferedUart` behaves: `read` waits for
+/// at least one byte, `write` for room in the TX buffer, `flush` until the buffer is sent.
+#[derive(Clone, Default)]
+struct SimUart(Rc<RefCell<Line>>);
+
+impl embedded_io_async::ErrorType for SimUart {
+    type Error = Infallible;
+}
+
+impl embedded_io_async::Read for SimUart {
+    async fn read(&mut self, buf: &mut [u8]) -> Result<usize, Infallible> {
+        poll_fn(|_| {
+            let mut line = self.0.borrow_mut();
+            if line.rx.is_empty() && !buf.is_empty() {
+                return Poll::Pending;
+            }
+            let n = buf.len().min(line.rx.len());
+            for b in buf.iter_mut().take(n) {
+                *b = line.rx.pop_front().unwrap_or(0);
+            }
+            Poll::Ready(Ok(n))
+        })
+        .await
+    }
+}
+
+impl embedded_io_async::Write for SimUart {
+    async fn write(&mut self, buf: &[u8]) -> Result<usize, Infallible> {
+        poll_fn(|_| {
+            let mut line = self.0.borrow_mut();
+            let free = UART_TX_BYTES - line.tx.len();
+            if free == 0 && !buf.is_empty() {
+                return Poll::Pending;
+            }
+            let n = buf.len().min(free);
+            line.tx.extend(&buf[..n]);
+            Poll::Ready(Ok(n))
+        })
+        .await
+    }
+    async fn flush(&mut self) -> Result<(), Infallible> {
+        poll_fn(|_| {
+            if self.0.borrow().tx.is_empty() {
+                Poll::Ready(Ok(()))
+            } else {
+                Poll::Pending
+            }
+        })
+        .await
+    }
+}
+
+/// An LED: an embedded-hal output pin whose level the test reads.
+#[derive(Clone, Default)]
+struct Led(Rc<Cell<bool>>);
+
+impl embedded_hal::digital::ErrorType for Led {
+    type Error = Infallible;
+}
+
+impl embedded_hal::digital::OutputPin for Led {
+    fn set_low(&mut self) -> Result<(), Infallible> {
+        self.0.set(false);
+        Ok(())
+    }
+    fn set_high(&mut self) -> Result<(), Infallible> {
+        self.0.set(true);
+        Ok(())
+    }
+}
+
+impl embedded_hal::digital::StatefulOutputPin for Led {
+    fn is_set_high(&mut self) -> Result<bool, Infallible> {
+        Ok(self.0.get())
+    }
+    fn is_set_low(&mut self) -> Result<bool, Infallible> {
+        Ok(!self.0.get())
+    }
+}
+
+/// The IWDG's counter: started by the supervisor, fed by it; the board resets the chip when
+/// it has not been fed for `IWDG_TIMEOUT_S`.
+#[derive(Clone, Copy, Default)]
+struct IwdgState {
+    running: bool,
+    last_feed_ns: u64,
+}
+
+struct FakeIwdg {
+    state: Rc<Cell<IwdgState>>,
+    clock: Clock,
+}
+
+impl Watchdog for FakeIwdg {
+    fn start(&mut self) {
+        self.state.set(IwdgState {
+            running: true,
+            last_feed_ns: self.clock.now_ns(),
+        });
+    }
+    fn feed(&mut self) {
+        let mut s = self.state.get();
+        s.last_feed_ns = self.clock.now_ns();
+        self.state.set(s);
+    }
+}
+
+/// One task's future, polled by the board after each sample.
+type Task = Pin<Box<dyn Future<Output = ()>>>;
+
+/// Polls a task once; it runs until it waits on time or the line. The tasks never end.
+fn poll_task(task: &mut Task) {
+    let mut cx = Context::from_waker(Waker::noop());
+    assert!(task.as_mut().poll(&mut cx).is_pending(), "a task returned");
+}
+
 struct VirtualBoardHw {
     last_reset: (ResetReason, u32),
     /// The control timer's rate, as last loaded by `set_rate` (or the boot).
-    rate_hz: f64,
+    rate_hz: Rc<Cell<f64>>,
+    clock: Clock,
 }
 
 impl Board for VirtualBoardHw {
@@ -116,14 +279,14 @@ impl Board for VirtualBoardHw {
         TIMER_CLOCK_HZ
     }
     fn set_rate(&mut self, t: &TimerSetting) {
-        self.rate_hz = t.rate_hz;
+        self.rate_hz.set(t.rate_hz);
     }
     fn last_reset(&self) -> (ResetReason, u32) {
         self.last_reset
     }
     fn now_us(&self) -> u64 {
         // Simulated time does not advance inside a task run; the board measures this.
-        0
+        self.clock.now_ns() / 1000
     }
 }
 
@@ -138,20 +301,43 @@ struct Trace {
     faults: u8,
 }
 
+/// The board's side of the peripherals the tasks use; it outlives a reset of the chip (the
+/// test reads it), the firmware gets clones at every boot.
+#[derive(Clone, Default)]
+struct Peripherals {
+    clock: Clock,
+    uart: SimUart,
+    led: Led,
+    fault_led: Led,
+    iwdg: Rc<Cell<IwdgState>>,
+    /// The control timer's rate as the command task last loaded it.
+    rate_hz: Rc<Cell<f64>>,
+    /// The supervisor's log: each change of verdict and when.
+    verdicts: Rc<RefCell<Vec<(f64, Verdict)>>>,
+}
+
+/// The three tasks of `hw/tasks.rs`, as futures.
+struct Tasks {
+    command: Task,
+    heartbeat: Task,
+    supervisor: Task,
+}
+
 /// The firmware's RAM: rebuilt from scratch at every boot.
 struct Firmware {
     links: Links<'static>,
     core: LoopCore<CAPTURE_RECORDS>,
-    app: App<CAPTURE_RECORDS>,
+    tasks: Tasks,
     learn: &'static LearnShared,
-    hw: VirtualBoardHw,
+    rate_hz: f64,
 }
 
 /// Steps 1-3 of `hw/mod.rs`'s boot on fresh RAM: the reset record read and cleared
 /// (`reset_reason::take_last_reset`, as `hw::safe_state::take_last_reset` calls it), the
 /// default settings, the interrupt's context with WATCHDOG latched after any reset that was
-/// not a power-on, the command task's `App`.
-fn load_firmware(uninit: &mut ResetRecord, iwdg_flag: bool) -> Firmware {
+/// not a power-on, the command task's `App`; then the tasks spawned as `hw/mod.rs` spawns them
+/// (their futures do nothing until polled).
+fn load_firmware(uninit: &mut ResetRecord, iwdg_flag: bool, io: &Peripherals) -> Firmware {
     let last_reset = take_last_reset(uninit, iwdg_flag);
     let links = Links {
         config: Box::leak(Box::new(Mailbox::<LoopConfig>::new())),
@@ -179,22 +365,71 @@ fn load_firmware(uninit: &mut ResetRecord, iwdg_flag: bool) -> Firmware {
         capture: capture.producer().expect("one producer"),
         learn: learn.recorder().expect("one recorder"),
     };
-    let app = App::new(
+    let mut app = App::new(
         links,
         capture,
         capture.consumer().expect("one consumer"),
         learn.task().expect("one learning task"),
         settings,
     );
+    io.rate_hz.set(settings.rate_hz);
+    let mut hw = VirtualBoardHw {
+        last_reset,
+        rate_hz: io.rate_hz.clone(),
+        clock: io.clock.clone(),
+    };
+    let (mut uart, mut led, mut fault_led) =
+        (io.uart.clone(), io.led.clone(), io.fault_led.clone());
+    let (clock, verdicts) = (io.clock.clone(), io.verdicts.clone());
+    let mut iwdg = FakeIwdg {
+        state: io.iwdg.clone(),
+        clock: io.clock.clone(),
+    };
+    let tasks = Tasks {
+        command: Box::pin({
+            let mut delay = SimDelay(io.clock.clone());
+            async move {
+                tasks::command_task(&mut uart, &mut delay, &mut app, &mut hw, links.liveness).await
+            }
+        }),
+        heartbeat: Box::pin({
+            let mut delay = SimDelay(io.clock.clone());
+            async move {
+                tasks::heartbeat_task(
+                    &mut delay,
+                    &mut led,
+                    &mut fault_led,
+                    links.status,
+                    links.liveness,
+                )
+                .await
+            }
+        }),
+        supervisor: Box::pin({
+            let mut delay = SimDelay(io.clock.clone());
+            async move {
+                let log = |v: &Verdict| {
+                    verdicts
+                        .borrow_mut()
+                        .push((clock.now_ns() as f64 * 1e-9, *v))
+                };
+                tasks::supervisor_task(
+                    &mut delay,
+                    &mut iwdg,
+                    links.liveness,
+                    links.stall_samples,
+                    log,
+                )
+                .await
+            }
+        }),
+    };
     Firmware {
         links,
         core,
-        app,
+        tasks,
         learn,
-        hw: VirtualBoardHw {
-            last_reset,
-            rate_hz: settings.rate_hz,
-        },
+        rate_hz: settings.rate_hz,
     }
 }
 
@@ -240,10 +475,10 @@ struct VirtualBoard {
     rate_hz: f64,
     links: Links<'static>,
     core: LoopCore<CAPTURE_RECORDS>,
-    app: App<CAPTURE_RECORDS>,
+    tasks: Tasks,
     /// The learning's shared buffers (`learn on`).
     learn: &'static LearnShared,
-    hw: VirtualBoardHw,
+    io: Peripherals,
     stage: FullStage,
     sensor: Sensor,
     noise_state: u32,
@@ -272,39 +507,39 @@ struct VirtualBoard {
     safe_state_log: Vec<&'static str>,
     boots: u32,
     isr_alive: bool,
+    /// False: the heartbeat task is no longer polled (a stalled task).
     heartbeat_alive: bool,
     tasks_started: bool,
-    next_cmd_s: f64,
-    next_hb_s: f64,
-    next_sup_s: f64,
-    sup_last: u32,
-    iwdg_unleashed: bool,
-    last_feed_s: f64,
     iwdg_resets: u32,
-    rx: VecDeque<u8>,
-    rx_overflow: u32,
-    tx: VecDeque<u8>,
     tx_credit: f64,
     host_rx: Vec<u8>,
-    frame: [u8; model_core::frame::MAX_FRAME],
+    /// Bytes the host has received in all.
+    host_rx_total: usize,
     trace: Vec<Trace>,
+    /// Simulated times of the green LED's changes.
+    led_toggles: Vec<f64>,
+    /// Samples during which the red LED was lit.
+    fault_led_samples: u64,
+    /// Greeting lines the host has read (one per boot).
+    greetings: u32,
 }
 
 impl VirtualBoard {
     /// Power-on: the boot sequence of `hw/mod.rs` (DAC safe, switch open, loop running).
     fn boot() -> Self {
         let mut uninit = ResetRecord::default();
-        let fw = load_firmware(&mut uninit, false);
+        let io = Peripherals::default();
+        let fw = load_firmware(&mut uninit, false, &io);
         let safe = DacCode::from_volts(params::SAFE_OUTPUT_V as f32);
         let mut vb = Self {
             n: 0,
             time_s: 0.0,
-            rate_hz: fw.hw.rate_hz,
+            rate_hz: fw.rate_hz,
             links: fw.links,
             core: fw.core,
-            app: fw.app,
+            tasks: fw.tasks,
             learn: fw.learn,
-            hw: fw.hw,
+            io,
             stage: stage_at(params::SAMPLE_RATE_HZ),
             sensor: Sensor::Connected,
             noise_state: 0x1234_5678,
@@ -323,27 +558,22 @@ impl VirtualBoard {
             isr_alive: true,
             heartbeat_alive: true,
             tasks_started: false,
-            next_cmd_s: 0.0,
-            next_hb_s: 0.0,
-            next_sup_s: 0.0,
-            sup_last: 0,
-            iwdg_unleashed: false,
-            last_feed_s: 0.0,
             iwdg_resets: 0,
-            rx: VecDeque::new(),
-            rx_overflow: 0,
-            tx: VecDeque::new(),
             tx_credit: 0.0,
             host_rx: vec![],
-            frame: [0; model_core::frame::MAX_FRAME],
+            host_rx_total: 0,
             trace: vec![],
+            led_toggles: vec![],
+            fault_led_samples: 0,
+            greetings: 0,
         };
         vb.start_boot();
         vb
     }
 
     /// The parts of a boot outside the firmware's RAM: DAC at the safe code (step 2), switch
-    /// open until the tasks start, the timer at the default rate, the schedule from now.
+    /// open until the tasks start, the timer at the default rate, the UART's buffers empty,
+    /// the LEDs off, the IWDG stopped.
     fn start_boot(&mut self) {
         let t = self.time_s;
         self.boots += 1;
@@ -355,26 +585,26 @@ impl VirtualBoard {
         self.heartbeat_alive = true;
         self.tasks_started = false;
         self.boot_t_s = t;
-        self.next_cmd_s = t + BOOT_LOOP_TO_TASKS_S;
-        self.next_hb_s = t + BOOT_LOOP_TO_TASKS_S;
-        self.next_sup_s = t + BOOT_LOOP_TO_TASKS_S;
-        self.sup_last = 0;
-        self.iwdg_unleashed = false;
-        self.rx.clear();
-        self.tx.clear();
+        {
+            let mut line = self.io.uart.0.borrow_mut();
+            line.rx.clear();
+            line.tx.clear();
+        }
+        self.io.led.0.set(false);
+        self.io.fault_led.0.set(false);
+        self.io.iwdg.set(IwdgState::default());
         self.follow_rate();
     }
 
     /// The chip comes out of reset: fresh RAM apart from `.uninit`, the RCC flag read and
     /// cleared, then the boot.
     fn reboot(&mut self) {
-        let fw = load_firmware(&mut self.uninit, self.iwdg_flag);
+        let fw = load_firmware(&mut self.uninit, self.iwdg_flag, &self.io);
         self.iwdg_flag = false;
         self.links = fw.links;
         self.core = fw.core;
-        self.app = fw.app;
+        self.tasks = fw.tasks;
         self.learn = fw.learn;
-        self.hw = fw.hw;
         self.start_boot();
     }
 
@@ -385,15 +615,16 @@ impl VirtualBoard {
         self.switch_closed = false;
         self.isr_alive = false;
         self.tasks_started = false;
-        self.iwdg_unleashed = false;
+        self.io.iwdg.set(IwdgState::default());
         self.boot_at_s = self.time_s + STARTUP_S;
     }
 
     /// A new timer rate (`rate`, or the boot's default): the stage model is re-timed (at rest
     /// at 0 V: `rate` is taken only in safe mode, where the output has ramped to 0 V).
     fn follow_rate(&mut self) {
-        if self.hw.rate_hz != self.rate_hz {
-            self.rate_hz = self.hw.rate_hz;
+        let rate_hz = self.io.rate_hz.get();
+        if rate_hz != self.rate_hz {
+            self.rate_hz = rate_hz;
             self.stage = stage_at(self.rate_hz);
         }
     }
@@ -427,7 +658,8 @@ impl VirtualBoard {
         scaling::adc_raw_of_pin(pin)
     }
 
-    /// One sample period: the interrupt, the stage, the tasks due, the serial line, the IWDG.
+    /// One sample period: the interrupt, the stage, the tasks (each polled once, in the
+    /// order command, heartbeat, supervisor), the serial line, the IWDG.
     fn tick(&mut self) {
         let t = self.t_s();
         if self.isr_alive && !self.halted {
@@ -473,6 +705,7 @@ impl VirtualBoard {
         let dt = 1.0 / self.rate_hz;
         self.n += 1;
         self.time_s += dt;
+        self.io.clock.0.set((self.time_s * 1e9).round() as u64);
         if self.halted {
             if self.time_s >= self.boot_at_s {
                 self.reboot();
@@ -485,77 +718,44 @@ impl VirtualBoard {
             self.switch_closed = true;
         }
         if self.tasks_started {
-            self.command_task(t);
+            let led = self.io.led.0.get();
+            poll_task(&mut self.tasks.command);
             self.follow_rate();
-            while self.heartbeat_alive && self.next_hb_s <= t {
-                self.links.liveness.check_in(TASK_HEARTBEAT);
-                self.next_hb_s += TASK_CHECK_IN_S;
+            if self.heartbeat_alive {
+                poll_task(&mut self.tasks.heartbeat);
             }
-            while self.next_sup_s <= t {
-                self.supervisor(t);
-                self.next_sup_s += SUPERVISOR_PERIOD_S;
+            poll_task(&mut self.tasks.supervisor);
+            if self.io.led.0.get() != led {
+                self.led_toggles.push(self.time_s);
+            }
+            if self.io.fault_led.0.get() {
+                self.fault_led_samples += 1;
             }
         }
         // The line drains at the baud rate (10 bits a byte).
         self.tx_credit += f64::from(UART_BAUD) / 10.0 * dt;
-        while self.tx_credit >= 1.0 {
-            match self.tx.pop_front() {
-                Some(b) => {
-                    self.host_rx.push(b);
-                    self.tx_credit -= 1.0;
-                }
-                None => {
-                    self.tx_credit = self.tx_credit.min(1.0);
-                    break;
-                }
-            }
-        }
-        if self.iwdg_unleashed && t - self.last_feed_s > IWDG_TIMEOUT_S {
-            self.iwdg_reset();
-        }
-    }
-
-    /// The command task: wakes on received bytes, an upload frame that fits, or its check-in
-    /// timeout; checks in each time it runs.
-    fn command_task(&mut self, t: f64) {
-        let uploading = self.app.uploading();
-        let fits = UART_TX_BYTES - self.tx.len() >= self.frame.len();
-        if self.rx.is_empty() && !(uploading && fits) && self.next_cmd_s > t {
-            return;
-        }
-        self.links.liveness.check_in(TASK_COMMAND);
-        self.next_cmd_s = t + TASK_CHECK_IN_S;
-        if let Some(reply) = self.app.poll(&self.hw) {
-            self.tx.extend(reply.as_bytes());
-            self.tx.extend(b"\r\n");
-        }
-        if uploading && fits {
-            let mut frame = self.frame;
-            if let Some(n) = self.app.next_upload_frame(&mut frame) {
-                self.tx.extend(&frame[..n]);
-            }
-        }
-        while let Some(b) = self.rx.pop_front() {
-            if let Some(reply) = self.app.feed(b, &mut self.hw) {
-                self.tx.extend(reply.as_bytes());
-                self.tx.extend(b"\r\n");
-            }
-        }
-    }
-
-    fn supervisor(&mut self, t: f64) {
-        if !self.iwdg_unleashed {
-            self.iwdg_unleashed = true;
-            self.last_feed_s = t;
-        }
-        let stall = self.links.stall_samples.load(Ordering::Relaxed);
-        if self
-            .links
-            .liveness
-            .supervise(&mut self.sup_last, liveness::min_advance(), stall)
-            == Verdict::Feed
         {
-            self.last_feed_s = t;
+            let mut line = self.io.uart.0.borrow_mut();
+            while self.tx_credit >= 1.0 {
+                match line.tx.pop_front() {
+                    Some(b) => {
+                        self.host_rx.push(b);
+                        self.host_rx_total += 1;
+                        self.tx_credit -= 1.0;
+                    }
+                    None => {
+                        self.tx_credit = self.tx_credit.min(1.0);
+                        break;
+                    }
+                }
+            }
+        }
+        let iwdg = self.io.iwdg.get();
+        if iwdg.running
+            && self.io.clock.now_ns().saturating_sub(iwdg.last_feed_ns) as f64 * 1e-9
+                > IWDG_TIMEOUT_S
+        {
+            self.iwdg_reset();
         }
     }
 
@@ -581,11 +781,16 @@ impl VirtualBoard {
     }
 
     /// Runs until a reply line arrives (at most 1 s); `line` names the command it answers.
+    /// The boot's greeting is not a reply: it is counted and skipped.
     fn reply(&mut self, line: &str) -> String {
         for _ in 0..(self.rate_hz as u64) {
             self.tick();
-            if let Some(p) = self.host_rx.windows(2).position(|w| w == b"\r\n") {
+            while let Some(p) = self.host_rx.windows(2).position(|w| w == b"\r\n") {
                 let reply: Vec<u8> = self.host_rx.drain(..p + 2).collect();
+                if reply == tasks::GREETING {
+                    self.greetings += 1;
+                    continue;
+                }
                 return String::from_utf8_lossy(&reply[..p]).into_owned();
             }
         }
@@ -593,13 +798,23 @@ impl VirtualBoard {
     }
 
     fn host_send(&mut self, line: &str) {
+        let mut l = self.io.uart.0.borrow_mut();
         for &b in line.as_bytes().iter().chain(b"\n") {
-            if self.rx.len() < UART_RX_BYTES {
-                self.rx.push_back(b);
+            if l.rx.len() < UART_RX_BYTES {
+                l.rx.push_back(b);
             } else {
-                self.rx_overflow += 1;
+                l.rx_overflow += 1;
             }
         }
+    }
+
+    fn rx_overflow(&self) -> u32 {
+        self.io.uart.0.borrow().rx_overflow
+    }
+
+    /// Bytes waiting in the board's TX buffer (an upload keeps it filled).
+    fn tx_pending(&self) -> usize {
+        self.io.uart.0.borrow().tx.len()
     }
 
     fn faults(&self) -> Faults {
@@ -618,7 +833,7 @@ impl Link for VirtualBoard {
         let samples = (timeout.as_secs_f64() * self.rate_hz) as u64;
         for _ in 0..samples.max(1) {
             self.tick();
-            if !self.host_rx.is_empty() && self.tx.is_empty() || self.host_rx.len() >= 4096 {
+            if !self.host_rx.is_empty() && self.tx_pending() == 0 || self.host_rx.len() >= 4096 {
                 break;
             }
         }
@@ -691,7 +906,24 @@ fn boot_closed_loop_reference_capture_and_upload_for_ten_seconds() {
     assert!(st.contains("dac_latency_max_us=22.38"), "{st}");
     assert!(vb.faults().is_empty());
     assert_eq!(vb.iwdg_resets, 0);
-    assert_eq!(vb.rx_overflow, 0);
+    assert_eq!(vb.rx_overflow(), 0);
+    // The tasks' own bodies: one greeting, the green LED at its half period (to a sample),
+    // the red one dark, the supervisor's verdict never left `Feed`.
+    assert_eq!(vb.greetings, 1);
+    let half_periods: Vec<f64> = vb.led_toggles.windows(2).map(|w| w[1] - w[0]).collect();
+    assert!(half_periods.len() >= 40, "{}", half_periods.len());
+    assert!(
+        half_periods
+            .iter()
+            .all(|p| (p - HEARTBEAT_HALF_PERIOD_S).abs() <= 1.5 / vb.rate_hz),
+        "{half_periods:?}"
+    );
+    assert_eq!(vb.fault_led_samples, 0);
+    assert!(
+        vb.io.verdicts.borrow().is_empty(),
+        "{:?}",
+        vb.io.verdicts.borrow()
+    );
     let samples = vb.n;
     println!(
         "virtual board: {:.2} s simulated ({samples} samples at {} Hz), faults 0x{:02x}, IWDG resets {}, capture 10000 records via piezo record in {upload_s:.2} s of line time, worst |r - y| in the 10 Hz sine capture {:.1} mV, status: {st}",
@@ -809,6 +1041,16 @@ fn stalled_task_raises_watchdog_ramps_to_safe_then_the_iwdg_resets() {
         "ramped, not stepped: {step}"
     );
     assert_eq!(vb.iwdg_resets, 1, "then the IWDG resets the chip");
+    // The supervisor task logged the stall once (the heartbeat's bit missing), and the command
+    // task's check-ins alone did not feed the IWDG.
+    let stalls: Vec<Verdict> = vb.io.verdicts.borrow().iter().map(|(_, v)| *v).collect();
+    assert_eq!(
+        stalls,
+        [Verdict::TasksStalled {
+            missing: firmware::liveness::TASK_HEARTBEAT
+        }],
+        "{stalls:?}"
+    );
     back_in_safe_after_the_watchdog(&mut vb, "stalled heartbeat");
 }
 
@@ -818,6 +1060,10 @@ fn stalled_task_raises_watchdog_ramps_to_safe_then_the_iwdg_resets() {
 fn back_in_safe_after_the_watchdog(vb: &mut VirtualBoard, what: &str) {
     assert_eq!(vb.boots, 2, "{what}: rebooted once");
     let st = vb.command("status");
+    assert_eq!(
+        vb.greetings, 2,
+        "{what}: the command task greets after the reboot"
+    );
     assert!(st.starts_with("ok mode=safe"), "{what}: {st}");
     assert_eq!(field(&st, "last_reset"), "watchdog", "{st}");
     assert_eq!(
@@ -850,6 +1096,10 @@ fn back_in_safe_after_the_watchdog(vb: &mut VirtualBoard, what: &str) {
     vb.run_s(0.1);
     let st = vb.command("status");
     assert_eq!(field(&st, "faults"), "0x00", "{st}");
+    assert!(
+        vb.fault_led_samples > 0,
+        "{what}: the red LED showed the latched fault"
+    );
     println!(
         "{what}: rebooted in safe mode, last_reset=watchdog, 1 s with no other fault and no second reset, output {max_out} V; after clear: faults 0x00"
     );
@@ -971,12 +1221,16 @@ fn a_configuration_swap_at_200_khz_is_an_index_swap_without_overrun() {
         }
     }
     let posted_at = posted_at.expect("the kc change posted");
-    let want = vb
-        .app
-        .settings()
-        .loop_config()
-        .expect("the new settings")
-        .controller;
+    // What the command task builds for `kc 5000` at this rate (a step reference does not enter
+    // the controller).
+    let want = Settings {
+        kc: 5000.0,
+        rate_hz: vb.rate_hz,
+        ..Settings::default()
+    }
+    .loop_config()
+    .expect("the new settings")
+    .controller;
     assert_ne!(
         vb.core.config.get().controller,
         want,
@@ -1020,7 +1274,7 @@ fn mode_safe_during_an_upload_is_applied_within_a_frame() {
     assert!(vb.command("capture status").starts_with("ok capture done"));
     vb.host_send("capture send");
     vb.run_s(0.5); // 46 kB of the 400 kB upload (4.6 s at 921 600 baud)
-    assert!(vb.app.uploading());
+    assert!(vb.tx_pending() > 0, "the upload is running");
     let t0 = vb.t_s();
     vb.host_send("mode safe");
     let mut applied = None;
@@ -1039,10 +1293,10 @@ fn mode_safe_during_an_upload_is_applied_within_a_frame() {
         applied * 1e3,
         t * 1e3,
         step * 1e3,
-        vb.app.uploading()
+        vb.tx_pending() > 0
     );
     assert!(applied < 0.005, "{applied}");
-    assert_eq!(vb.rx_overflow, 0);
+    assert_eq!(vb.rx_overflow(), 0);
 }
 
 /// Issue 13 item 6: the DAC frame at a fixed instant costs one sample of delay. Its effect on
