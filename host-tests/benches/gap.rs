@@ -32,8 +32,9 @@ fn main() {
         let d = diagnose(&base, &data, &Options::default()).expect("diagnosis");
         let s = t0.elapsed().as_secs_f64();
         println!(
-            "gap: 150 s @ 1 kHz + 0.2 s @ 50 kHz diagnosed in {s:.2} s on {cores} cores; named {:?}",
-            d.named
+            "gap: 150 s @ 1 kHz + 0.2 s @ 50 kHz diagnosed in {s:.2} s on {cores} cores; named {:?}, final {:.2}x the floor",
+            d.named,
+            d.final_rms_v / d.noise_floor_v
         );
         times.push(s);
     }

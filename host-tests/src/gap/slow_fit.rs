@@ -37,6 +37,12 @@ pub struct SlowRegressors {
     range: (f64, f64),
     /// The hysteresis start memory the basis was computed with.
     start_v: Vec<f64>,
+    /// The records' weighted Gram matrix of the columns that depend on the input alone and
+    /// the offset's (the sensor gain's row and column zero), computed at the first solve and
+    /// kept: every candidate of a step solves on the same regressors with its own target and
+    /// sensor-gain column, which cost two products per column and row instead of a column's
+    /// worth each.
+    gram: std::sync::OnceLock<DMatrix<f64>>,
 }
 
 impl SlowRegressors {
@@ -56,6 +62,12 @@ impl SlowRegressors {
 /// record does; the Gram matrix of the 96 columns then costs the same for any record length,
 /// and the regressors' memory stays at 15 MB a record).
 pub const MAX_SLOW_ROWS: usize = 20_000;
+
+/// Rows of one record the drift time constants' search evaluates on (every solve of the
+/// search; the final solve at the chosen time constants uses all [`MAX_SLOW_ROWS`]). Our
+/// assumption: a drift lag of 10 ms or more is sampled evenly by 4000 of a record's settled
+/// samples; each search solve then costs a fifth.
+const DRIFT_SEARCH_ROWS: usize = 4_000;
 
 /// How the slow regressors are shaped by the slow effects' non-linear parameters (the
 /// structural refinement of [`fit_slow`]).
@@ -146,6 +158,7 @@ pub(super) fn slow_regressors(data: &[Data], start_v: &[f64]) -> SlowRegressors 
         hyst: std::sync::Arc::new(hyst),
         range,
         start_v: start_v.to_vec(),
+        gram: std::sync::OnceLock::new(),
     };
     slow_regressors_shaped(data, &Shape::default(), &base)
 }
@@ -219,7 +232,40 @@ fn slow_regressors_shaped(data: &[Data], shape: &Shape, base: &SlowRegressors) -
         hyst: base.hyst.clone(),
         range: base.range,
         start_v: base.start_v.clone(),
+        gram: std::sync::OnceLock::new(),
     }
+}
+
+/// The weighted Gram matrix of the input-only columns and the offset's ([`SlowRegressors`]'
+/// `gram`).
+#[allow(clippy::needless_range_loop)] // a triangle of the matrix
+fn input_gram(x: &SlowRegressors) -> DMatrix<f64> {
+    let mut g = DMatrix::<f64>::zeros(N_COLS, N_COLS);
+    for (cols, rows) in x.cols.iter().zip(&x.rows) {
+        let w = 1.0 / rows.len().max(1) as f64;
+        let mut gl = vec![[0.0f64; N_COLS]; N_COLS];
+        let mut row = [0.0f64; N_COLS];
+        for j in 0..rows.len() {
+            for (k, c) in cols.iter().enumerate() {
+                row[k] = c[j];
+            }
+            row[COL_OFFSET] = 1.0;
+            for k in 0..=COL_OFFSET {
+                for l in 0..=k {
+                    gl[k][l] += row[k] * row[l];
+                }
+            }
+        }
+        for k in 0..=COL_OFFSET {
+            for l in 0..=k {
+                g[(k, l)] += w * gl[k][l];
+                if l != k {
+                    g[(l, k)] += w * gl[k][l];
+                }
+            }
+        }
+    }
+    g
 }
 
 /// The slow effects in `set` fitted to the residual of the model without slow effects (`y0`):
@@ -378,39 +424,29 @@ fn fit_slow_linear(
     set: &[&str],
     start: Option<[f64; 3]>,
 ) -> Option<SlowParams> {
-    // Gram matrix of all columns and the target.
-    let mut g = DMatrix::<f64>::zeros(N_COLS, N_COLS);
+    // Gram matrix of all columns and the target: the input-only part is the regressors' own
+    // (computed once), the sensor gain's column (`y0`) and the target are this call's.
+    let mut g = x.gram.get_or_init(|| input_gram(x)).clone();
     let mut b = DVector::<f64>::zeros(N_COLS);
     for (r, d) in data.iter().enumerate() {
         let cols = &x.cols[r];
         let rows = &x.rows[r];
         let w = 1.0 / rows.len().max(1) as f64;
-        let mut gl = vec![[0.0f64; N_COLS]; N_COLS];
-        let mut bl = [0.0f64; N_COLS];
-        let mut row = [0.0f64; N_COLS];
-        for (j, &i) in rows.iter().enumerate() {
-            let e = d.y_v[i] - y0[r][i];
-            for (k, c) in cols.iter().enumerate() {
-                row[k] = c[j];
-            }
-            row[COL_OFFSET] = 1.0;
-            row[COL_SGAIN] = y0[r][i];
-            for k in 0..N_COLS {
-                bl[k] += row[k] * e;
-                for l in 0..=k {
-                    gl[k][l] += row[k] * row[l];
-                }
-            }
+        let e: Vec<f64> = rows.iter().map(|&i| d.y_v[i] - y0[r][i]).collect();
+        let s: Vec<f64> = rows.iter().map(|&i| y0[r][i]).collect();
+        let dot = |a: &[f64], b: &[f64]| a.iter().zip(b).map(|(x, y)| x * y).sum::<f64>();
+        for (k, c) in cols.iter().enumerate() {
+            b[k] += w * dot(c, &e);
+            let gs = w * dot(c, &s);
+            g[(k, COL_SGAIN)] += gs;
+            g[(COL_SGAIN, k)] += gs;
         }
-        for k in 0..N_COLS {
-            b[k] += w * bl[k];
-            for l in 0..=k {
-                g[(k, l)] += w * gl[k][l];
-                if l != k {
-                    g[(l, k)] += w * gl[k][l];
-                }
-            }
-        }
+        b[COL_OFFSET] += w * e.iter().sum::<f64>();
+        b[COL_SGAIN] += w * dot(&s, &e);
+        let gs = w * s.iter().sum::<f64>();
+        g[(COL_OFFSET, COL_SGAIN)] += gs;
+        g[(COL_SGAIN, COL_OFFSET)] += gs;
+        g[(COL_SGAIN, COL_SGAIN)] += w * dot(&s, &s);
     }
     let solve = |idx: &[usize]| -> Option<(Vec<f64>, f64)> {
         let p = idx.len();
@@ -498,17 +534,18 @@ fn fit_slow_linear(
         // the neighbouring grid values), each solve with the other columns.
         let grid = catalogue::DRIFT_TAU_GRID_S;
         let mut taus = ti.map(|i| grid[i]);
-        let problem = DriftProblem::new(data, y0, x, &fixed, &g, &b);
+        // The search evaluates on evenly thinned rows (DRIFT_SEARCH_ROWS a record), the final
+        // solve on all of them.
+        let problem = DriftProblem::new(data, y0, x, &fixed, &g, &b, usize::MAX);
+        let search = DriftProblem::new(data, y0, x, &fixed, &g, &b, DRIFT_SEARCH_ROWS);
         let eval = |taus: &[f64; 3]| -> f64 {
-            problem
-                .solve(taus)
-                .map_or(f64::NEG_INFINITY, |(beta, red)| {
-                    if beta.iter().take(3).all(|g| g.abs() <= 1.0) {
-                        red
-                    } else {
-                        f64::NEG_INFINITY
-                    }
-                })
+            search.solve(taus).map_or(f64::NEG_INFINITY, |(beta, red)| {
+                if beta.iter().take(3).all(|g| g.abs() <= 1.0) {
+                    red
+                } else {
+                    f64::NEG_INFINITY
+                }
+            })
         };
         // Coordinate descent: the valley is narrow (a shorter first lag and a play operator
         // of small threshold trade against each other), so it runs until a pass gains less
@@ -522,6 +559,7 @@ fn fit_slow_linear(
                 (taus, cur_val) = (t0, v);
             }
         }
+        let tau_hi = (grid[N_TAU - 1] * 2.0).min(tau_max.max(grid[n_tau - 1]));
         for pass in 0..DRIFT_REFINE_PASSES {
             let last = cur_val;
             // The first pass searches a factor 3 either side, later ones 1.25 with fewer
@@ -533,11 +571,7 @@ fn fit_slow_linear(
                 } else {
                     grid[0] * 0.5
                 };
-                let hi = if m < 2 {
-                    taus[m + 1] / 1.05
-                } else {
-                    (grid[N_TAU - 1] * 2.0).min(tau_max.max(grid[n_tau - 1]))
-                };
+                let hi = if m < 2 { taus[m + 1] / 1.05 } else { tau_hi };
                 // Also skips NaN bounds.
                 if lo.partial_cmp(&hi) != Some(std::cmp::Ordering::Less) {
                     continue;
@@ -646,6 +680,9 @@ struct DriftProblem<'a> {
 type DriftRecord = (f64, Vec<usize>, Vec<f64>, Vec<f64>);
 
 impl<'a> DriftProblem<'a> {
+    /// The problem on the regressors' rows, evenly thinned to at most `max_rows` a record;
+    /// `g` and `b` are the weighted Gram matrix and products of all rows (used as they are
+    /// when no record is thinned).
     fn new(
         data: &'a [Data],
         y0: &[Vec<f64>],
@@ -653,30 +690,61 @@ impl<'a> DriftProblem<'a> {
         fixed: &[usize],
         g: &DMatrix<f64>,
         b: &DVector<f64>,
+        max_rows: usize,
     ) -> Self {
         let nf = fixed.len();
-        let recs = data
+        let mut thinned = false;
+        let recs: Vec<DriftRecord> = data
             .iter()
             .enumerate()
             .map(|(r, d)| {
-                let idx: Vec<usize> = x.rows[r].clone();
+                let stride = x.rows[r].len().div_ceil(max_rows.max(1)).max(1);
+                thinned |= stride > 1;
+                let js: Vec<usize> = (0..x.rows[r].len()).step_by(stride).collect();
+                let idx: Vec<usize> = js.iter().map(|&j| x.rows[r][j]).collect();
                 let w = 1.0 / idx.len().max(1) as f64;
                 let e = idx.iter().map(|&i| d.y_v[i] - y0[r][i]).collect();
                 let mut f = Vec::with_capacity(idx.len() * nf);
-                for j in 0..idx.len() {
+                for &j in &js {
                     f.extend(fixed.iter().map(|&c| col(x, y0, r, c, j)));
                 }
                 (w, idx, e, f)
             })
             .collect();
+        let (g_ff, b_f) = if thinned {
+            let mut g_ff = DMatrix::<f64>::zeros(nf, nf);
+            let mut b_f = DVector::<f64>::zeros(nf);
+            for (w, _, e, f) in &recs {
+                for (j, ej) in e.iter().enumerate() {
+                    let row = &f[j * nf..(j + 1) * nf];
+                    for k in 0..nf {
+                        b_f[k] += w * row[k] * ej;
+                        for l in 0..=k {
+                            g_ff[(k, l)] += w * row[k] * row[l];
+                        }
+                    }
+                }
+            }
+            for k in 0..nf {
+                for l in 0..k {
+                    g_ff[(l, k)] = g_ff[(k, l)];
+                }
+            }
+            (g_ff, b_f)
+        } else {
+            (
+                DMatrix::from_fn(nf, nf, |i, j| g[(fixed[i], fixed[j])]),
+                DVector::from_fn(nf, |i, _| b[fixed[i]]),
+            )
+        };
         Self {
             data,
             drive: &x.drive,
             recs,
             fixed: fixed.to_vec(),
             nf,
-            g_ff: DMatrix::from_fn(nf, nf, |i, j| g[(fixed[i], fixed[j])]),
-            b_f: DVector::from_fn(nf, |i, _| b[fixed[i]]),
+            g_ff,
+            b_f,
         }
     }
 
