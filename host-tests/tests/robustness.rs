@@ -180,6 +180,25 @@ fn gap_refuses_too_many_samples_with_their_count() {
     checks::bound_gap(&ok, 2e-5).expect("a small record runs");
 }
 
+/// The recommended protocol at the length the README and issue #12 use (a 0.2 s fast record
+/// and a 150 s slow one) runs without a setting: the work bound refused it before (1.5e8 stage
+/// steps against 1e8).
+#[test]
+fn gap_takes_the_recommended_protocol_without_a_setting() {
+    if std::env::var_os(checks::MAX_STEPS_ENV).is_some() {
+        return; // the bound is the caller's
+    }
+    let standard = vec![
+        ("id-fast.csv".to_string(), 10_000, 0.2),
+        ("id-slow.csv".to_string(), 150_000, 150.0),
+    ];
+    checks::bound_gap(&standard, 2e-5).expect("the recommended protocol runs");
+    // ... and a record three times the longest the bound admits does not.
+    let long = vec![("long.csv".to_string(), 600_000, 1200.0)];
+    let e = checks::bound_gap(&long, 2e-5).unwrap_err().to_string();
+    assert!(e.contains(checks::MAX_STEPS_ENV), "{e}");
+}
+
 #[test]
 fn synth_steps_with_a_tiny_hold_is_refused() {
     let d = dir("hold");

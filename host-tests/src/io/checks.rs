@@ -108,12 +108,29 @@ pub fn bound_steps(what: &str, steps: u64, limit: u64) -> anyhow::Result<()> {
 }
 
 /// The most samples `piezo gap` takes over all its records: its fits hold several
-/// simulations of every record at once (about 550 MB and half a minute per million samples).
+/// simulations of every record at once (measured: 220 MB to 1 GB peak per million samples).
 pub const GAP_MAX_SAMPLES: usize = 2_000_000;
 
-/// `piezo gap` simulates each record some tens of times: its bound on stage steps (summed over
-/// the records) is [`max_stage_steps`] divided by this.
-pub const GAP_RUNS_PER_RECORD: u64 = 20;
+/// `piezo gap` simulates each record some tens of times (about 90 passes over the records
+/// for the recommended protocol, measured by the gap benchmark): the passes its bound counts.
+pub const GAP_RUNS_PER_RECORD: u64 = 100;
+
+/// `piezo gap`'s default bound on the stage steps of one pass over its records: 20 million,
+/// 400 s of records at the 20 us step (our assumption: the recommended protocol, a 0.2 s fast
+/// record and a 150 s slow one, takes 7.5 million a pass and about 20 s in all on 2 cores, and
+/// must run without a setting; 400 s of records take about a minute). The run takes
+/// [`GAP_RUNS_PER_RECORD`] passes; `PIEZO_MAX_STEPS`, when set, bounds the whole run instead.
+pub const GAP_MAX_STEPS_PER_PASS: u64 = 20_000_000;
+
+/// The bound on `piezo gap`'s stage steps over all its passes: `PIEZO_MAX_STEPS` if set to a
+/// positive integer, else [`GAP_MAX_STEPS_PER_PASS`] times [`GAP_RUNS_PER_RECORD`].
+pub fn gap_max_stage_steps() -> u64 {
+    std::env::var(MAX_STEPS_ENV)
+        .ok()
+        .and_then(|s| s.trim().parse::<u64>().ok())
+        .filter(|&n| n > 0)
+        .unwrap_or(GAP_MAX_STEPS_PER_PASS * GAP_RUNS_PER_RECORD)
+}
 
 /// Bounds `piezo gap`'s work before it starts: `records` are (name, samples, span in
 /// seconds), `period_s` the model's step.
@@ -122,7 +139,7 @@ pub fn bound_gap(records: &[(String, usize, f64)], period_s: f64) -> anyhow::Res
     if samples > GAP_MAX_SAMPLES {
         bail!(
             "the records hold {samples} samples in all, more than the {GAP_MAX_SAMPLES} the model-gap \
-             workflow takes (about 550 MB per million): decimate them or cut them shorter"
+             workflow takes (up to 1 GB per million): decimate them or cut them shorter"
         );
     }
     let steps = records
@@ -137,7 +154,7 @@ pub fn bound_gap(records: &[(String, usize, f64)], period_s: f64) -> anyhow::Res
             steps
         ),
         steps.saturating_mul(GAP_RUNS_PER_RECORD),
-        max_stage_steps(),
+        gap_max_stage_steps(),
     )
 }
 
