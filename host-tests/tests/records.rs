@@ -67,6 +67,49 @@ fn good_records_parse_at_any_rate_and_ignore_other_columns() {
     );
 }
 
+/// Time stamps rounded by the logger (`f32`, a few printed decimals) or jittery, on a record
+/// whose converters ran on a steady clock: taken as uniform at the mean interval, with a note;
+/// a real gap is still refused.
+#[test]
+fn rounded_time_stamps_are_taken_as_uniform_with_a_note() {
+    // 10 s at 50 kHz with f32 time stamps: intervals off by up to a few % near 10 s.
+    let n = 500_000;
+    let t: Vec<f64> = (0..n).map(|i| (i as f64 * 2e-5) as f32 as f64).collect();
+    let mean = (t[n - 1] - t[0]) / (n - 1) as f64;
+    let given = t
+        .windows(2)
+        .map(|w| ((w[1] - w[0]) - mean).abs() / mean)
+        .fold(0.0, f64::max);
+    assert!(given > 0.01 && given < 0.2, "{given}");
+    let u = vec![1.0; n];
+    let r = Record::new(t, u, None, None).unwrap();
+    assert_eq!(r.original_jitter, Some(given));
+    assert!(r.time_jitter() < 1e-6, "{}", r.time_jitter());
+    assert!((r.rate_hz() - 50_000.0).abs() < 0.01, "{}", r.rate_hz());
+    let note = r.time_note("f32.csv").expect("a note");
+    println!("{note}");
+    assert!(note.contains("f32.csv") && note.contains("taken as uniform"));
+    // 3 kHz printed with five decimals (0.00033, 0.00067, 0.00100, ...): 1.5 % off.
+    let mut s = String::from("t,u\n");
+    for i in 0..3000 {
+        s.push_str(&format!("{:.5},0\n", i as f64 / 3000.0));
+    }
+    let r = Record::parse(&s).unwrap();
+    assert!(r.original_jitter.is_some_and(|j| j > 0.01));
+    assert!((r.rate_hz() - 3000.0).abs() < 0.01, "{}", r.rate_hz());
+    // Exact times: kept as given, no note.
+    let r = Record::parse("t,u\n0,0\n0.25,1\n0.5,2\n").unwrap();
+    assert_eq!(r.original_jitter, None);
+    assert_eq!(r.t_s, vec![0.0, 0.25, 0.5]);
+    assert!(r.time_note("exact.csv").is_none());
+    // A missing sample (one interval twice the others) is refused.
+    let mut s = String::from("t,u\n");
+    for i in (0..100).filter(|&i| i != 50) {
+        s.push_str(&format!("{},0\n", i as f64 * 1e-3));
+    }
+    assert!(err(&s).contains("sampling interval"), "{}", err(&s));
+}
+
 #[test]
 fn writer_round_trips_exactly() {
     let t: Vec<f64> = (0..100).map(|i| i as f64 * 1e-3).collect();

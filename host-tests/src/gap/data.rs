@@ -227,6 +227,9 @@ pub fn load_data(paths: &[std::path::PathBuf], vars: Option<&str>) -> anyhow::Re
         } else {
             Record::read(p).with_context(|| format!("record {}", p.display()))?
         };
+        if let Some(note) = rec.time_note(&name) {
+            eprintln!("{note}");
+        }
         out.push(Data::from_record(&name, rec)?);
     }
     Ok(out)

@@ -6,8 +6,13 @@
 //! 0.00000,0.0,0.0012,0.0
 //! 0.00002,1.0,0.0009,1.0
 //! ```
-//! * `t`: time, seconds; strictly increasing and **uniformly sampled** at any rate (each
-//!   interval within 0.1 % of the mean interval, plus 1 ns for printing);
+//! * `t`: time, seconds; strictly increasing and **uniformly sampled** at any rate. An
+//!   interval may differ from the mean interval by up to [`TIME_JITTER_MAX`] (20 %) of it:
+//!   time stamps rounded to `f32` or to a few printed digits, or taken from a jittery clock,
+//!   while the converters run on a steady one. Beyond 0.1 % (plus 1 ns) the times are replaced
+//!   by the uniform grid `t0 + i T` at the mean interval and [`Record::original_jitter`] says
+//!   by how much they differed (the verbs print a note); beyond 20 % (a gap, a change of rate)
+//!   the record is refused;
 //! * `u`: volts at the amplifier's control input (required);
 //! * `y`: sensor monitor volts (required by [`Record::require_y`], optional for inputs);
 //! * `r`: reference volts (optional); any other column is ignored.
@@ -57,10 +62,20 @@ impl std::fmt::Display for At {
     }
 }
 
+/// Largest deviation of a sampling interval from the mean interval, as a fraction of it,
+/// taken as time-stamp rounding or jitter of a uniformly clocked acquisition (our assumption:
+/// `f32` time stamps round a 50 kHz record's intervals by up to 5 % of them); larger is a gap
+/// or a non-uniform record.
+pub const TIME_JITTER_MAX: f64 = 0.2;
+
+/// Deviations up to this fraction of the mean interval (plus 1 ns) count as exact uniform
+/// sampling: the times are kept as given.
+pub const TIME_EXACT: f64 = 1e-3;
+
 /// A uniformly sampled record.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Record {
-    /// Sample times, seconds.
+    /// Sample times, seconds (uniform: see [`Record::time_jitter`]).
     pub t_s: Vec<f64>,
     /// Amplifier control input, volts.
     pub u_v: Vec<f64>,
@@ -68,6 +83,9 @@ pub struct Record {
     pub y_v: Option<Vec<f64>>,
     /// Reference, volts, when the file has an `r` column.
     pub r_v: Option<Vec<f64>>,
+    /// The jitter of the given times ([`Record::time_jitter`] before they were made uniform),
+    /// when they were not uniform to [`TIME_EXACT`].
+    pub original_jitter: Option<f64>,
 }
 
 /// Why a record was refused.
@@ -275,9 +293,68 @@ impl Record {
         if let Some(r) = &r_v {
             check(r, "r")?;
         }
-        let rec = Self { t_s, u_v, y_v, r_v };
+        let mut rec = Self {
+            t_s,
+            u_v,
+            y_v,
+            r_v,
+            original_jitter: None,
+        };
         rec.check_time(&|i| At::Element(i + 1))?;
+        rec.retime();
         Ok(rec)
+    }
+
+    /// Largest deviation of a sampling interval from the mean interval, as a fraction of it;
+    /// above [`TIME_EXACT`] the times were replaced by the uniform grid at the mean interval
+    /// when the record was made.
+    pub fn time_jitter(&self) -> f64 {
+        let t = &self.t_s;
+        let n = t.len();
+        if n < 2 {
+            return 0.0;
+        }
+        let mean = (t[n - 1] - t[0]) / (n - 1) as f64;
+        t.windows(2)
+            .map(|w| ((w[1] - w[0]) - mean).abs() / mean)
+            .fold(0.0, f64::max)
+    }
+
+    /// A one-line note when the file's times were not uniform to [`TIME_EXACT`] (`None` if
+    /// they were): how much they jittered and the rate the record is taken at.
+    pub fn time_note(&self, name: &str) -> Option<String> {
+        let j = self.original_jitter?;
+        Some(format!(
+            "note: {name}: sampling intervals differ from their mean by up to {:.2} % (time stamps rounded or jittery); taken as uniform at {:.6} Hz",
+            100.0 * j,
+            self.rate_hz()
+        ))
+    }
+
+    /// Times within [`TIME_JITTER_MAX`] but not [`TIME_EXACT`] of uniform: replaced by the
+    /// uniform grid `t0 + i T` fitted to all of them by least squares (rounding errors average
+    /// out; the end points alone would carry theirs into the rate).
+    fn retime(&mut self) {
+        let n = self.t_s.len();
+        let j = self.time_jitter();
+        let mean = (self.t_s[n - 1] - self.t_s[0]) / (n - 1) as f64;
+        if j * mean <= TIME_EXACT * mean + 1e-9 {
+            return;
+        }
+        let i_mean = (n - 1) as f64 / 2.0;
+        let t_mean = self.t_s.iter().sum::<f64>() / n as f64;
+        let (mut sxy, mut sxx) = (0.0, 0.0);
+        for (i, t) in self.t_s.iter().enumerate() {
+            let di = i as f64 - i_mean;
+            sxy += di * (t - t_mean);
+            sxx += di * di;
+        }
+        let period = sxy / sxx;
+        let t0 = t_mean - period * i_mean;
+        for (i, t) in self.t_s.iter_mut().enumerate() {
+            *t = t0 + i as f64 * period;
+        }
+        self.original_jitter = Some(j);
     }
 
     fn check_time(&self, at: &dyn Fn(usize) -> At) -> Result<(), RecordError> {
@@ -297,7 +374,7 @@ impl Record {
             }
         }
         let mean = (t[n - 1] - t[0]) / (n - 1) as f64;
-        let tol = 1e-3 * mean + 1e-9;
+        let tol = TIME_JITTER_MAX * mean + 1e-9;
         for i in 1..n {
             let dt = t[i] - t[i - 1];
             if (dt - mean).abs() > tol {
@@ -405,13 +482,15 @@ impl Record {
             return Err(RecordError::Empty);
         }
         let [t_s, u_v, y_v, r_v] = cols;
-        let rec = Self {
+        let mut rec = Self {
             t_s,
             u_v,
             y_v: iy.map(|_| y_v),
             r_v: ir.map(|_| r_v),
+            original_jitter: None,
         };
         rec.check_time(&|i| At::Line(lines.get(i).copied().unwrap_or(0)))?;
+        rec.retime();
         Ok(rec)
     }
 

@@ -45,6 +45,9 @@ fn load(f: &IdentifyFlags) -> anyhow::Result<(ModelFile, Record)> {
     checks::refuse_overwrite(&f.out, &[&f.data, Path::new(&f.model)])?;
     let model = ModelFile::load(&f.model)?;
     let rec = Record::read(&f.data).with_context(|| format!("record {}", f.data.display()))?;
+    if let Some(note) = rec.time_note(&f.data.display().to_string()) {
+        eprintln!("{note}");
+    }
     rec.require_y()
         .with_context(|| format!("record {}", f.data.display()))?;
     Ok((model, rec))

@@ -36,6 +36,9 @@ pub fn run(a: &SimulateArgs) -> anyhow::Result<()> {
     let stage = model.build_stage()?;
     let rec =
         Record::read(&a.input).with_context(|| format!("input record {}", a.input.display()))?;
+    if let Some(note) = rec.time_note(&a.input.display().to_string()) {
+        eprintln!("{note}");
+    }
     let span_s = rec.t_s[rec.len() - 1] - rec.t_s[0];
     checks::bound_steps(
         &format!(
