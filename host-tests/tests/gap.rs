@@ -970,3 +970,74 @@ fn single_sine_tells_drift_from_hysteresis() {
         assert!(d.final_rms_v < 1.5 * d.noise_floor_v, "{}", d.final_rms_v);
     }
 }
+
+/// A lab that records the amplifier's input through a converter gets an input with noise: a
+/// held level wanders by a few tenths of a millivolt. Holds must still be found (within
+/// `HOLD_BAND_SIGMAS` of the input's own noise), so the drift's evidence (its tails during
+/// holds), the report's tail plots and the cannot-tell check see what they see on the exact
+/// command: random levels held 0.5-2 s for 30 s at 1 kHz, a drift of two lags (0.15 s and
+/// 2.5 s), the recorded input with 0.3 mV of noise (the stage saw the exact levels). Before
+/// the band, the noisy record had no hold and its drift's evidence read "tails after steps up
+/// to 0.0 mV during holds".
+#[test]
+fn drift_is_named_when_the_recorded_input_is_noisy() {
+    let base = ModelFile::built_in("thesis-linear").unwrap();
+    let rate_hz = 1_000.0;
+    let mut rng = rand::rngs::StdRng::seed_from_u64(41);
+    let n = (30.0 * rate_hz) as usize;
+    let t: Vec<f64> = (0..n).map(|i| i as f64 / rate_hz).collect();
+    let mut u = Vec::with_capacity(n);
+    while u.len() < n {
+        let level = rng.gen_range(0.5..9.5);
+        let hold = (rng.gen_range(0.5..2.0) * rate_hz) as usize;
+        u.extend(std::iter::repeat_n(level, hold.min(n - u.len())));
+    }
+    let mut truth = ModelFile::built_in("thesis-linear").unwrap();
+    truth.converters.noise_v = 1e-3;
+    truth.converters.seed = 41;
+    truth.drift = Some(host_tests::io::model_file::DriftSection {
+        gains: [0.04, 0.05, 0.0],
+        taus_s: [0.15, 2.5, 100.0],
+        poly: [1.0, 0.0, 0.0, 0.0],
+        poly_range_v: [0.0, 10.0],
+    });
+    let stage = truth.build_stage().unwrap();
+    let y = simulate(&stage, truth.period_s, &t, &u);
+    let noisy: Vec<f64> = u
+        .iter()
+        .map(|v| {
+            // Gaussian by Box-Muller, 0.3 mV.
+            let (a, b): (f64, f64) = (rng.r#gen::<f64>().max(1e-300), rng.r#gen());
+            v + 3e-4 * (-2.0 * a.ln()).sqrt() * (2.0 * std::f64::consts::PI * b).cos()
+        })
+        .collect();
+    let mut outcomes = Vec::new();
+    for (what, u_rec) in [("exact input", &u), ("noisy input", &noisy)] {
+        let rec = Record::new(t.clone(), u_rec.clone(), Some(y.clone()), None).unwrap();
+        let data = Data::from_record("levels.csv", rec).unwrap();
+        let holds = data.holds().len();
+        let d = diagnose(&base, &[data], &Options::default()).unwrap();
+        let ratio = d.final_rms_v / d.noise_floor_v;
+        println!(
+            "{what}: {holds} holds, named {:?}, final {ratio:.2}x the floor, cannot tell: {:?}",
+            d.named, d.cannot_tell
+        );
+        let evidence = d
+            .steps
+            .iter()
+            .find(|s| s.effect == "drift" && !s.removed)
+            .map(|s| s.evidence.clone())
+            .unwrap_or_default();
+        println!("{what}: drift evidence: {evidence}");
+        outcomes.push((holds, d.named.clone(), ratio, evidence));
+    }
+    let (exact_holds, exact_named, _, exact_evidence) = &outcomes[0];
+    let (noisy_holds, noisy_named, noisy_ratio, noisy_evidence) = &outcomes[1];
+    let tails = |e: &str| e.split(';').next().unwrap_or("").to_string();
+    assert_eq!(tails(noisy_evidence), tails(exact_evidence));
+    assert!(*exact_holds >= 10, "{exact_holds}");
+    assert_eq!(noisy_holds, exact_holds, "the same holds found");
+    assert_eq!(exact_named, &["drift"]);
+    assert_eq!(noisy_named, exact_named);
+    assert!(*noisy_ratio <= 1.5, "{noisy_ratio}");
+}

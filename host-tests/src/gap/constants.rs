@@ -76,6 +76,12 @@ pub const HYST_LOOP_MIN_NOISE: f64 = 3.0;
 /// Shortest run of constant input that counts as a hold, seconds (our assumption: long enough
 /// for a drift tail of 10-100 ms lags to show after the step's transient).
 pub const HOLD_MIN_S: f64 = 0.2;
+/// A held input measured with noise stays within this many of its noise's standard deviations
+/// of the hold's first sample ([`super::data::hold_band_v`]; our assumption: the difference of
+/// two samples exceeds 10 sigma with probability 1e-12, so a 10 000-sample hold is not broken
+/// by noise, while a step of 10 sigma, 3 mV for a 16-bit monitor of a 10 V input, still ends
+/// it).
+pub const HOLD_BAND_SIGMAS: f64 = 10.0;
 
 /// Records without holds cannot tell a drift from a hysteresis loop at low frequency when the
 /// other effect, fitted in the named one's place, leaves every record's residual within this

@@ -8,7 +8,9 @@
 //! after the last input change when there are enough of them, so ringing after edges does not
 //! count.
 
-use super::constants::{FAST_RATE_HZ, JUMP_MIN_V, JUMP_RATIO, MIN_SAMPLES, REVERSAL_MIN_V};
+use super::constants::{
+    FAST_RATE_HZ, HOLD_BAND_SIGMAS, JUMP_MIN_V, JUMP_RATIO, MIN_SAMPLES, REVERSAL_MIN_V,
+};
 use crate::io::csv::Record;
 use crate::io::model_file::ModelFile;
 use crate::sim::open_loop::simulate_after;
@@ -26,6 +28,29 @@ pub struct Data {
     pub u_v: Vec<f64>,
     /// Sensor monitor, volts.
     pub y_v: Vec<f64>,
+    /// How far the recorded input may wander and still count as held, volts
+    /// ([`hold_band_v`]): 1 nV for an input logged as the exact command, wider when the input
+    /// was measured with noise.
+    pub hold_band_v: f64,
+}
+
+/// [`HOLD_BAND_SIGMAS`] times a robust estimate of the noise on the recorded input (median
+/// absolute second difference; 0 where the input is mostly held or moves smoothly, as a
+/// logged DAC command does), at least 1 nV. An input measured through a converter wanders by
+/// its noise during a hold; without the band no hold is found, and the drift's evidence, the
+/// report's tails and the cannot-tell check ([`Data::holds`]) see none.
+pub fn hold_band_v(u_v: &[f64]) -> f64 {
+    let mut d2: Vec<f64> = u_v
+        .windows(3)
+        .map(|w| (w[2] - 2.0 * w[1] + w[0]).abs())
+        .collect();
+    // Second differences of white noise of variance s^2 have variance 6 s^2.
+    let sigma = if d2.is_empty() {
+        0.0
+    } else {
+        1.4826 * median(&mut d2) / 6f64.sqrt()
+    };
+    (HOLD_BAND_SIGMAS * sigma).max(1e-9)
 }
 
 impl Data {
@@ -47,11 +72,13 @@ impl Data {
             "record {name}: the input u never moves (span {:.3} V): nothing to compare",
             hi - lo
         );
+        let hold_band_v = hold_band_v(&rec.u_v);
         Ok(Self {
             name: name.to_string(),
             t_s: rec.t_s,
             u_v: rec.u_v,
             y_v: y,
+            hold_band_v,
         })
     }
 
@@ -121,7 +148,7 @@ impl Data {
         let mut i = 1;
         while i < n {
             let start = i;
-            while i < n && (self.u_v[i] - self.u_v[start]).abs() <= 1e-9 {
+            while i < n && (self.u_v[i] - self.u_v[start]).abs() <= self.hold_band_v {
                 i += 1;
             }
             if (i - start) as f64 * t >= super::constants::HOLD_MIN_S {
@@ -166,7 +193,7 @@ pub fn noise_floor(d: &Data) -> f64 {
     let mut since = vec![usize::MAX; n];
     let mut last_change: Option<usize> = None;
     for i in 0..n {
-        if i > 0 && (d.u_v[i] - d.u_v[i - 1]).abs() > 1e-9 {
+        if i > 0 && (d.u_v[i] - d.u_v[i - 1]).abs() > d.hold_band_v {
             last_change = Some(i);
         }
         since[i] = last_change.map_or(usize::MAX, |c| i - c);

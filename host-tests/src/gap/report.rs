@@ -377,21 +377,13 @@ pub fn write(dir: &Path, base: &ModelFile, data: &[Data], d: &Diagnosis) -> anyh
         }
         // Tails: residual during holds, time since the hold began.
         let mut tails: Vec<Series> = Vec::new();
-        let n = rec.len();
         let t = rec.period_s();
-        let mut i = 1;
-        while i < n {
-            let s = i;
-            while i < n && (rec.u_v[i] - rec.u_v[s]).abs() <= 1e-9 {
-                i += 1;
-            }
-            if (i - s) as f64 * t >= 0.2 && tails.len() < 6 {
-                let pts: Vec<(f64, f64)> = (s..i)
-                    .map(|k| ((k - s) as f64 * t, res[k] - res[s.min(n - 1)]))
-                    .collect();
-                tails.push((format!("hold at {:.2} V", rec.u_v[s]), thin(pts, 1500)));
-            }
-            i += 1;
+        for hold in rec.holds().into_iter().take(6) {
+            let s = hold.start;
+            let pts: Vec<(f64, f64)> = hold
+                .map(|k| ((k - s) as f64 * t, res[k] - res[s]))
+                .collect();
+            tails.push((format!("hold at {:.2} V", rec.u_v[s]), thin(pts, 1500)));
         }
         if !tails.is_empty() {
             h.push_str(&plot(

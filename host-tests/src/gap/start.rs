@@ -72,6 +72,7 @@ fn head(d: &Data, k: usize) -> Data {
         t_s: d.t_s[..k].to_vec(),
         u_v: d.u_v[..k].to_vec(),
         y_v: d.y_v[..k].to_vec(),
+        hold_band_v: d.hold_band_v,
     }
 }
 
