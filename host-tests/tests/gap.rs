@@ -606,9 +606,11 @@ fn a_residual_no_effect_explains_is_reported_as_unexplained() {
 /// limit, saturation, 2.5 mV noise) diagnosed from `thesis-linear`. Its forms are not all in
 /// the catalogue's (the table is the thesis' congruent quadratic Everett function, its K(u)
 /// is held above 6 V), so the residual does not reach the floor, but the three slow effects
-/// must be named and kept, and the gap must shrink: measured 663 mV to 76.8 mV (8.6x).
-/// (Before the final check kept effects whose removal adds more than
-/// `PRUNE_KEEP_EXCESS_VAR` noise variances, it pruned all three one after another.)
+/// must be named and kept, and the gap must shrink: measured 663 mV to 51.4 mV (12.9x, 20.5x
+/// the floor), with a `sensor-gain` of the table's centre-line slope beside them (the
+/// loop-only table cannot carry it; with the keep rule at 1000 variances it was pruned and
+/// the residual stayed at 76.8 mV). (Before the final check kept effects whose removal adds
+/// more than `PRUNE_KEEP_EXCESS_VAR` noise variances, it pruned all three one after another.)
 #[test]
 fn full_thesis_stage_names_its_slow_effects() {
     let truth = ModelFile::built_in("thesis-full").unwrap();
@@ -635,9 +637,9 @@ fn full_thesis_stage_names_its_slow_effects() {
     // Issue #12 asks for drift, hysteresis and nonlinear-gain: the catalogue's split (the
     // table the loop about the base model's reversible map, `nonlinear-gain` the centre line's
     // curvature, `everett::HYST_FIT_REVERSIBLE`). Asserted: those three named, and a cut of
-    // the residual of at least 7x (measured 8.6x, to 30.6x the floor; the play-sum form cut
-    // 5.4x; fitting the bands' reversible slopes too cut 14.8x but took K'(u) into the table
-    // and never named `nonlinear-gain`).
+    // the residual of at least 10x (measured 12.9x, to 20.5x the floor; 8.6x with the keep
+    // rule at 1000 variances; the play-sum form cut 5.4x; fitting the bands' reversible slopes
+    // too cut 14.8x but took K'(u) into the table and never named `nonlinear-gain`).
     for e in ["drift", "hysteresis", "nonlinear-gain"] {
         assert!(
             d.named.iter().any(|n| n == e),
@@ -646,10 +648,47 @@ fn full_thesis_stage_names_its_slow_effects() {
         );
     }
     assert!(
-        d.final_rms_v * 7.0 <= base_rms,
+        d.final_rms_v * 10.0 <= base_rms,
         "cut only {:.1}x",
         base_rms / d.final_rms_v
     );
+}
+
+/// One 10 s record at 5 kHz of a 1 Hz sine over 0-9 V (the issue's real-record protocol) of
+/// the full thesis stage, from `thesis-linear`: the drift, whose removal raises the residual
+/// 2.6x (24.6 to 63.1 mV, 530 noise variances), is a true effect and must stay (with the keep
+/// rule at 1000 variances it was pruned and the record ended at 25x its floor; measured now
+/// 9.3x, asserted <= 12x). Named: hysteresis, drift and an `offset` the truth does not have
+/// (70 % of what is left lies in the first second, the stage's start from rest, which the
+/// fitted start memory and the drift's lags at rest do not match; a constant takes part of
+/// it). Asserted: hysteresis and drift among the names.
+#[test]
+fn a_sine_of_the_thesis_stage_keeps_its_drift() {
+    let truth = ModelFile::built_in("thesis-full").unwrap();
+    let stage = truth.build_stage().unwrap();
+    let rate_hz = 5_000.0;
+    let t: Vec<f64> = (0..(10.0 * rate_hz) as usize)
+        .map(|i| i as f64 / rate_hz)
+        .collect();
+    let u: Vec<f64> = t
+        .iter()
+        .map(|&x| 4.5 - 4.5 * (2.0 * std::f64::consts::PI * x).cos())
+        .collect();
+    let y = simulate(&stage, truth.period_s, &t, &u);
+    let data =
+        vec![Data::from_record("sine.csv", Record::new(t, u, Some(y), None).unwrap()).unwrap()];
+    let base = ModelFile::built_in("thesis-linear").unwrap();
+    let d = diagnose(&base, &data, &Options::default()).unwrap();
+    println!("{}", d.table());
+    let ratio = d.final_rms_v / d.noise_floor_v;
+    for e in ["hysteresis", "drift"] {
+        assert!(
+            d.named.iter().any(|n| n == e),
+            "{e} not named: {:?}",
+            d.named
+        );
+    }
+    assert!(ratio <= 12.0, "final {ratio:.2}x the floor");
 }
 
 /// Records of `truth` on the identification protocol (`slow_s` seconds of slow record), each

@@ -424,16 +424,14 @@ pub fn diagnose(base: &ModelFile, data: &[Data], opts: &Options) -> anyhow::Resu
                 let line_back = e.len() == 1
                     && e[0] == "resonance"
                     && signatures::compute(data, &s, &noise).supports(&e[0], &model);
-                // An effect whose removal adds more than PRUNE_KEEP_EXCESS_VAR noise variances
-                // to some record's residual power explains a component no noise makes: it stays
-                // whatever the ratio (far from the floor, ratios are compressed).
-                let large =
-                    (0..ms.len()).any(|i| ms[i] - cur_mse[i] > PRUNE_KEEP_EXCESS_VAR * var[i]);
-                let ratio = if line_back || large {
-                    f64::INFINITY
-                } else {
-                    growth(&ms)
-                };
+                // An effect whose removal grows the residual by PRUNE_RATIO and adds more than
+                // PRUNE_KEEP_EXCESS_VAR noise variances to some record's residual power
+                // explains a component no noise makes: it stays whatever its per-parameter bar
+                // (far from the floor, ratios are compressed).
+                let g = growth(&ms);
+                let large = g >= PRUNE_RATIO
+                    && (0..ms.len()).any(|i| ms[i] - cur_mse[i] > PRUNE_KEEP_EXCESS_VAR * var[i]);
+                let ratio = if line_back || large { f64::INFINITY } else { g };
                 (e, m, s, ms, ratio)
             })
             // Among the units below their bars, the largest first (two effects explained by
