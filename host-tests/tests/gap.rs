@@ -666,14 +666,7 @@ fn full_thesis_stage_names_its_slow_effects() {
 fn a_sine_of_the_thesis_stage_keeps_its_drift() {
     let truth = ModelFile::built_in("thesis-full").unwrap();
     let stage = truth.build_stage().unwrap();
-    let rate_hz = 5_000.0;
-    let t: Vec<f64> = (0..(10.0 * rate_hz) as usize)
-        .map(|i| i as f64 / rate_hz)
-        .collect();
-    let u: Vec<f64> = t
-        .iter()
-        .map(|&x| 4.5 - 4.5 * (2.0 * std::f64::consts::PI * x).cos())
-        .collect();
+    let (t, u) = raised_cosine(5_000.0, 10.0, 1.0, 4.5, 4.5);
     let y = simulate(&stage, truth.period_s, &t, &u);
     let data =
         vec![Data::from_record("sine.csv", Record::new(t, u, Some(y), None).unwrap()).unwrap()];
@@ -799,13 +792,7 @@ fn pi_predistort(u: &[f64], radii_v: &[f64], weights: &[f64], z0: Option<&[f64]>
 /// offset, 1 mV noise. Returns per seed the names given and the final residual over the
 /// floor.
 fn single_sine_outcomes() -> Vec<(u64, Vec<String>, f64)> {
-    let rate_hz = 5_000.0;
-    let n = (10.0 * rate_hz) as usize;
-    let t: Vec<f64> = (0..n).map(|i| i as f64 / rate_hz).collect();
-    let u: Vec<f64> = t
-        .iter()
-        .map(|&x| 5.0 - 4.5 * (2.0 * std::f64::consts::PI * x).cos())
-        .collect();
+    let (t, u) = raised_cosine(5_000.0, 10.0, 1.0, 5.0, 4.5);
     let mut results = Vec::new();
     for seed in [21u64, 22] {
         let mut rng = rand::rngs::StdRng::seed_from_u64(seed);
@@ -942,6 +929,38 @@ fn gap_verb_on_a_clean_record_exits_0_with_unexplained_null() {
     let _ = std::fs::remove_dir_all(&dir);
 }
 
+/// `seconds` of `mid_v - amp_v cos(2 pi freq_hz t)` sampled at `rate_hz`: (t, u).
+fn raised_cosine(
+    rate_hz: f64,
+    seconds: f64,
+    freq_hz: f64,
+    mid_v: f64,
+    amp_v: f64,
+) -> (Vec<f64>, Vec<f64>) {
+    let t: Vec<f64> = (0..(seconds * rate_hz) as usize)
+        .map(|i| i as f64 / rate_hz)
+        .collect();
+    let u = t
+        .iter()
+        .map(|&x| mid_v - amp_v * (2.0 * std::f64::consts::PI * freq_hz * x).cos())
+        .collect();
+    (t, u)
+}
+
+/// `thesis-linear` with 1 mV of noise (seed `seed`) and a drift of three lags, K(u) = 1.
+fn linear_with_drift(seed: u64, gains: [f64; 3], taus_s: [f64; 3]) -> ModelFile {
+    let mut m = ModelFile::built_in("thesis-linear").unwrap();
+    m.converters.noise_v = 1e-3;
+    m.converters.seed = seed;
+    m.drift = Some(host_tests::io::model_file::DriftSection {
+        gains,
+        taus_s,
+        poly: [1.0, 0.0, 0.0, 0.0],
+        poly_range_v: [0.0, 10.0],
+    });
+    m
+}
+
 /// Issue #12 item 1: without holds, a drift and a hysteresis loop both shape a slow periodic
 /// residual, so the workflow fits the other in the named one's place and says when it cannot
 /// tell them apart ([`gap::CannotTell`], `"cannot_tell"` in the JSON). On one 20 s, 0.2 Hz sine
@@ -953,23 +972,8 @@ fn gap_verb_on_a_clean_record_exits_0_with_unexplained_null() {
 #[test]
 fn single_sine_tells_drift_from_hysteresis() {
     let base = ModelFile::built_in("thesis-linear").unwrap();
-    let rate_hz = 1_000.0;
-    let t: Vec<f64> = (0..(20.0 * rate_hz) as usize)
-        .map(|i| i as f64 / rate_hz)
-        .collect();
-    let u: Vec<f64> = t
-        .iter()
-        .map(|&x| 5.0 - 4.0 * (2.0 * std::f64::consts::PI * 0.2 * x).cos())
-        .collect();
-    let mut drift = ModelFile::built_in("thesis-linear").unwrap();
-    drift.converters.noise_v = 1e-3;
-    drift.converters.seed = 31;
-    drift.drift = Some(host_tests::io::model_file::DriftSection {
-        gains: [0.08, 0.0, 0.0],
-        taus_s: [0.8, 10.0, 100.0],
-        poly: [1.0, 0.0, 0.0, 0.0],
-        poly_range_v: [0.0, 10.0],
-    });
+    let (t, u) = raised_cosine(1_000.0, 20.0, 0.2, 5.0, 4.0);
+    let drift = linear_with_drift(31, [0.08, 0.0, 0.0], [0.8, 10.0, 100.0]);
     let bouc_wen = Truth {
         effects: vec!["hysteresis".into()],
         creep: None,
@@ -1031,15 +1035,7 @@ fn drift_is_named_when_the_recorded_input_is_noisy() {
         let hold = (rng.gen_range(0.5..2.0) * rate_hz) as usize;
         u.extend(std::iter::repeat_n(level, hold.min(n - u.len())));
     }
-    let mut truth = ModelFile::built_in("thesis-linear").unwrap();
-    truth.converters.noise_v = 1e-3;
-    truth.converters.seed = 41;
-    truth.drift = Some(host_tests::io::model_file::DriftSection {
-        gains: [0.04, 0.05, 0.0],
-        taus_s: [0.15, 2.5, 100.0],
-        poly: [1.0, 0.0, 0.0, 0.0],
-        poly_range_v: [0.0, 10.0],
-    });
+    let truth = linear_with_drift(41, [0.04, 0.05, 0.0], [0.15, 2.5, 100.0]);
     let stage = truth.build_stage().unwrap();
     let y = simulate(&stage, truth.period_s, &t, &u);
     let noisy: Vec<f64> = u
