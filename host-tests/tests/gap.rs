@@ -682,6 +682,10 @@ fn a_sine_of_the_thesis_stage_keeps_its_drift() {
         );
     }
     assert!(ratio <= 12.0, "final {ratio:.2}x the floor");
+    // A sine has no hold: the drift's evidence says so (it read "tails after steps up to
+    // 0.0 mV during holds").
+    let drift = d.steps.iter().find(|s| s.effect == "drift").unwrap();
+    assert!(drift.evidence.starts_with("no hold"), "{}", drift.evidence);
 }
 
 /// Records of `truth` on the identification protocol (`slow_s` seconds of slow record), each

@@ -38,6 +38,8 @@ pub struct Signatures {
     pub peak_hz: f64,
     /// Largest tail after a step during a hold, volts.
     pub tail_v: f64,
+    /// Holds in the records ([`Data::holds`]).
+    pub holds: usize,
     /// Largest rising/falling gap of the residual at equal input, volts.
     pub loop_v: f64,
     /// Curvature of the residual against the input (largest deviation from the chord), volts.
@@ -110,6 +112,7 @@ pub fn compute(data: &[Data], sims: &[Vec<f64>], noise: &[f64]) -> Signatures {
         }
         // Holds: the tail after each step's transient.
         for h in d.holds() {
+            s.holds += 1;
             let len = h.len();
             let skip = ((0.02 / t).ceil() as usize).min(len / 4);
             let w = ((len - skip) / 10).max(1);
@@ -302,6 +305,10 @@ impl Signatures {
                     f,
                     self.line_ratio_near(f)
                 )
+            }
+            "drift" if self.holds == 0 => {
+                "no hold in the records to show tails: the lags follow a slow residual under the moving input"
+                    .to_string()
             }
             "drift" => format!("tails after steps up to {} during holds", mv(self.tail_v)),
             "hysteresis" => format!(
