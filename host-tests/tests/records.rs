@@ -110,6 +110,20 @@ fn rounded_time_stamps_are_taken_as_uniform_with_a_note() {
     assert!(err(&s).contains("sampling interval"), "{}", err(&s));
 }
 
+/// Spreadsheets in decimal-comma locales export with semicolons (or tabs) and decimal commas:
+/// read as the comma-separated file with points would be.
+#[test]
+fn semicolon_and_tab_separated_records_read_with_decimal_commas() {
+    let commas = Record::parse("t,u,y\n0,0.5,0.25\n0.001,1.5,-0.75\n0.002,2,1e-3\n").unwrap();
+    let semis = Record::parse("t;u;y\n0;0,5;0,25\n0,001;1,5;-0,75\n0,002;2;1e-3\n").unwrap();
+    let tabs = Record::parse("t\tu\ty\n0\t0.5\t0.25\n0.001\t1,5\t-0.75\n0.002\t2\t1e-3\n").unwrap();
+    assert_eq!(semis, commas);
+    assert_eq!(tabs, commas);
+    // A field that is not a number either way is refused with its text.
+    let e = err("t;u\n0;1\n0,001;1,2,3\n");
+    assert!(e.contains("line 3") && e.contains("1,2,3"), "{e}");
+}
+
 #[test]
 fn writer_round_trips_exactly() {
     let t: Vec<f64> = (0..100).map(|i| i as f64 * 1e-3).collect();

@@ -17,7 +17,9 @@
 //! * `y`: sensor monitor volts (required by [`Record::require_y`], optional for inputs);
 //! * `r`: reference volts (optional); any other column is ignored.
 //!
-//! Columns are separated by commas, surrounding spaces are trimmed, blank lines are skipped,
+//! Columns are separated by commas (or, when the header has no comma, by semicolons or tabs,
+//! as spreadsheets in decimal-comma locales export them; a decimal comma is then read as a
+//! point), surrounding spaces are trimmed, blank lines are skipped,
 //! a UTF-8 byte-order mark at the start is ignored. Every failure is a [`RecordError`] naming
 //! where (the line of a CSV file, the element of a column handed to [`Record::new`], e.g. from
 //! a `.mat` file) and the problem: a missing column, a field that is not a number, NaN or
@@ -264,6 +266,20 @@ fn check_values(v: &[f64], column: &str, at: fn(usize) -> At) -> Result<(), Reco
     Ok(())
 }
 
+/// The field separator a header line uses: `,` if it has one, else `;` or a tab if it has
+/// one, else `,`.
+pub fn separator(header: &str) -> char {
+    if header.contains(',') {
+        ','
+    } else if header.contains(';') {
+        ';'
+    } else if header.contains('\t') {
+        '\t'
+    } else {
+        ','
+    }
+}
+
 impl Record {
     /// A record from columns; checks lengths, values (finite, within [`MAX_ABS_V`]), uniform
     /// sampling and the rate. Errors name the element (1-based) of the column.
@@ -397,7 +413,7 @@ impl Record {
         Ok(())
     }
 
-    /// Parse CSV text.
+    /// Parse CSV text (comma-, semicolon- or tab-separated: see [`separator`]).
     pub fn parse(text: &str) -> Result<Self, RecordError> {
         // A byte-order mark (as some spreadsheet programs write) is not part of the header.
         let text = text.strip_prefix('\u{feff}').unwrap_or(text);
@@ -405,13 +421,20 @@ impl Record {
         let (mut it, mut iu, mut iy, mut ir) = (0, 0, None, None);
         let mut cols: [Vec<f64>; 4] = Default::default();
         let mut lines = Vec::new();
+        // The separator, from the header: a comma, else a semicolon or a tab (as spreadsheets
+        // in locales with a decimal comma export), where a decimal comma is then read as a
+        // point.
+        let mut sep = ',';
         for (k, raw) in text.lines().enumerate() {
             let line = k + 1;
             let s = raw.trim();
             if s.is_empty() || s.starts_with('#') {
                 continue;
             }
-            let fields: Vec<&str> = s.split(',').map(str::trim).collect();
+            if header.is_none() {
+                sep = separator(s);
+            }
+            let fields: Vec<&str> = s.split(sep).map(str::trim).collect();
             match &header {
                 None => {
                     let names: Vec<String> = fields
@@ -451,7 +474,14 @@ impl Record {
                         let Some(idx) = *idx else { continue };
                         let text = fields.get(idx).copied().unwrap_or("");
                         let column = names.get(idx).cloned().unwrap_or_default();
-                        let v: f64 = text.parse().map_err(|_| RecordError::NotANumber {
+                        let point;
+                        let number = if sep != ',' && text.contains(',') {
+                            point = text.replacen(',', ".", 1);
+                            point.as_str()
+                        } else {
+                            text
+                        };
+                        let v: f64 = number.parse().map_err(|_| RecordError::NotANumber {
                             line,
                             column: column.clone(),
                             text: truncate(text),
