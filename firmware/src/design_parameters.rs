@@ -12,6 +12,17 @@ pub const CAPTURE_RECORDS: usize = 50_000;
 /// Baud rate of the command and capture link over the ST-LINK virtual COM port (USART3);
 /// the ST-LINK V3 bridges it to USB (our assumption).
 pub const UART_BAUD: u32 = 921_600;
+/// The command UART's transmit ring buffer, bytes: two upload frames' worth of line time
+/// (our assumption).
+pub const UART_TX_BYTES: usize = 2048;
+/// The command UART's receive ring buffer, bytes: several command lines (our assumption).
+pub const UART_RX_BYTES: usize = 256;
+
+// ----- Clocks (`hw/board.rs` sets them up and checks them against embassy's at boot). -----
+/// CPU clock, Hz (the DWT cycle counter counts at this rate).
+pub const CPU_HZ: u32 = 400_000_000;
+/// Clock of the general-purpose timers on APB1 (TIM2), Hz.
+pub const TIMER_CLOCK_HZ: u32 = 200_000_000;
 
 // ----- What a command may ask for. -----
 /// Highest frequency of an on-board sine or triangle reference, Hz: twice the closed-loop

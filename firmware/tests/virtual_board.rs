@@ -48,8 +48,8 @@ use std::time::Duration;
 use firmware::app::{App, Board};
 use firmware::capture::CaptureBuffer;
 use firmware::design_parameters::{
-    BOOT_LOOP_TO_TASKS_S, CAPTURE_RECORDS, HEARTBEAT_HALF_PERIOD_S, IWDG_TIMEOUT_S,
-    SUPERVISOR_PERIOD_S, TASK_CHECK_IN_S, UART_BAUD,
+    BOOT_LOOP_TO_TASKS_S, CAPTURE_RECORDS, CPU_HZ, HEARTBEAT_HALF_PERIOD_S, IWDG_TIMEOUT_S,
+    SUPERVISOR_PERIOD_S, TASK_CHECK_IN_S, TIMER_CLOCK_HZ, UART_BAUD, UART_RX_BYTES, UART_TX_BYTES,
 };
 use firmware::learn::LearnShared;
 use firmware::liveness::{Liveness, Verdict};
@@ -68,14 +68,6 @@ use model_core::controller::{ControllerState, Faults};
 use model_core::stage::{Stage, StageConfig};
 use model_core::{AdcCode, DacCode, params};
 
-/// CPU clock the virtual board reports (the board's 400 MHz).
-const CPU_HZ: u32 = 400_000_000;
-/// Timer clock (the board's 200 MHz).
-const TIMER_CLOCK_HZ: u32 = 200_000_000;
-/// Size of the board's UART TX buffer (`hw/mod.rs`).
-const UART_TX_BYTES: usize = 2048;
-/// Size of the board's UART RX buffer (`hw/mod.rs`).
-const UART_RX_BYTES: usize = 256;
 /// Cycles the virtual interrupt reports per sample: 2.5 us at 400 MHz, under the budget at
 /// every rate (1200 cycles at 200 kHz: the 5 us period less the 2 us conversion allowance of
 /// `app::apply_rate_limits`). Our assumption until the board measures `isr_max_us`.

@@ -20,10 +20,9 @@
 use embassy_stm32::interrupt::Priority;
 use embassy_stm32::time::Hertz;
 
-/// CPU clock, Hz (the DWT cycle counter counts at this rate).
-pub const CPU_HZ: u32 = 400_000_000;
-/// Clock of the general-purpose timers on APB1 (TIM2), Hz.
-pub const TIMER_CLOCK_HZ: u32 = 200_000_000;
+/// The clocks this file sets up (`firmware::design_parameters`, where the virtual board
+/// reads them too).
+pub use firmware::design_parameters::{CPU_HZ, TIMER_CLOCK_HZ};
 
 /// The control interrupt: the highest priority.
 pub const PRIO_CONTROL: Priority = Priority::P0;

@@ -97,8 +97,8 @@ bind_interrupts!(struct Irqs {
     USART3 => usart::BufferedInterruptHandler<peripherals::USART3>;
 });
 
-static UART_TX: StaticCell<[u8; 2048]> = StaticCell::new();
-static UART_RX: StaticCell<[u8; 256]> = StaticCell::new();
+static UART_TX: StaticCell<[u8; design_parameters::UART_TX_BYTES]> = StaticCell::new();
+static UART_RX: StaticCell<[u8; design_parameters::UART_RX_BYTES]> = StaticCell::new();
 
 #[embassy_executor::main]
 async fn main(spawner: Spawner) {
