@@ -606,10 +606,11 @@ fn a_residual_no_effect_explains_is_reported_as_unexplained() {
 /// limit, saturation, 2.5 mV noise) diagnosed from `thesis-linear`. Its forms are not all in
 /// the catalogue's (the table is the thesis' congruent quadratic Everett function, its K(u)
 /// is held above 6 V), so the residual does not reach the floor, but the three slow effects
-/// must be named and kept, and the gap must shrink: measured 663 mV to 51.4 mV (12.9x, 20.5x
-/// the floor), with a `sensor-gain` of the table's centre-line slope beside them (the
-/// loop-only table cannot carry it; with the keep rule at 1000 variances it was pruned and
-/// the residual stayed at 76.8 mV). (Before the final check kept effects whose removal adds
+/// must be named and kept, and the gap must shrink: measured 663 mV to 42.1 mV (15.8x, 16.8x
+/// the floor; 51.4 mV with the geometric radii before the basis followed the table), with a
+/// `sensor-gain` of the table's centre-line slope beside them (the loop-only table cannot
+/// carry it; with the keep rule at 1000 variances it was pruned and the residual stayed at
+/// 76.8 mV). (Before the final check kept effects whose removal adds
 /// more than `PRUNE_KEEP_EXCESS_VAR` noise variances, it pruned all three one after another.)
 #[test]
 fn full_thesis_stage_names_its_slow_effects() {
@@ -852,10 +853,12 @@ fn single_sine_outcomes() -> Vec<(u64, Vec<String>, f64)> {
 
 /// What the workflow achieves on the single-sine records today: hysteresis named, no
 /// slow effect but `nonlinear-gain` beside it, and the residual within 16x the floor
-/// (measured 14.7x, with hysteresis alone, and 6.2x, with `nonlinear-gain` taking a 30 mV
-/// curvature the loop columns leave; with the bands' reversible slopes fitted it was 7.1x
-/// and 6.3x, but the families suite lost 11 points of exact names; without a start memory
-/// and with the table ending at the records' extremes it was 33x and 26x).
+/// (measured 10.6x and 9.0x, hysteresis alone, with the basis' radii at the table's
+/// resolution; with the fixed geometric radii before it 14.7x, and 6.2x with
+/// `nonlinear-gain` taking a 30 mV curvature the loop columns left; with the bands'
+/// reversible slopes fitted it was 7.1x and 6.3x, but the families suite lost 11 points of
+/// exact names; without a start memory and with the table ending at the records' extremes
+/// it was 33x and 26x).
 #[test]
 fn single_sine_record_names_hysteresis_and_its_start() {
     for (seed, named, ratio) in single_sine_outcomes() {
@@ -875,10 +878,10 @@ fn single_sine_record_names_hysteresis_and_its_start() {
 
 /// Issue #12's requirement on the single-sine record: hysteresis and offset named, the
 /// residual within 2x its floor. Not met yet (offset: the table's relays that never switch
-/// during the record make a constant of their own; 6-15x the floor is left, in the first
+/// during the record make a constant of their own; 9-11x the floor is left, 56-59 % of it in the first
 /// second and at the sine's harmonics): run with `--ignored`.
 #[test]
-#[ignore = "issue #12: not met yet (hysteresis named, offset not, 6-15x the floor)"]
+#[ignore = "issue #12: not met yet (hysteresis named, offset not, 9-11x the floor)"]
 fn single_sine_record_names_hysteresis_and_offset() {
     for (seed, named, ratio) in single_sine_outcomes() {
         let mut named = named.clone();

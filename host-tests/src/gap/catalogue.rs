@@ -61,15 +61,6 @@ pub const DRIFT_TAU_GRID_S: [f64; 14] = [
     0.005, 0.01, 0.02, 0.05, 0.1, 0.2, 0.5, 1.0, 2.0, 5.0, 10.0, 20.0, 50.0, 200.0,
 ];
 
-/// Half-widths of the relays of the hysteresis basis ([`super::everett`]), volts at the
-/// amplifier input (geometric, ratio 1.41, 30 mV..5 V; our assumption: the sign-constrained
-/// solve picks a few of them, so a truth whose operators have other radii than any fixed
-/// set, such as `model_core::params::PLAY_RADII_V`, is still matched by its neighbours; the
-/// table's grid, 45 nodes over the records' span, blurs the narrowest ones into its cells).
-pub const PLAY_GRID_V: [f64; 16] = [
-    0.03, 0.042, 0.06, 0.084, 0.12, 0.17, 0.24, 0.33, 0.47, 0.66, 0.93, 1.3, 1.85, 2.6, 3.7, 5.0,
-];
-
 /// Is `effect` present in `m`?
 pub fn present(m: &ModelFile, effect: &str) -> bool {
     match effect {

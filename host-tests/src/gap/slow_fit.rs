@@ -15,7 +15,7 @@ use super::constants::{
 };
 use super::data::Data;
 use super::everett::{self, HYST_COLS, HYST_FIT_COLS, HystFit};
-use super::nnls::{nnls_normal, ridge};
+use super::nnls::{nnls_normal, nnls_normal_from, ridge};
 use crate::util::golden_n;
 use model_core::params;
 use nalgebra::{DMatrix, DVector};
@@ -243,27 +243,18 @@ fn input_gram(x: &SlowRegressors) -> DMatrix<f64> {
     let mut g = DMatrix::<f64>::zeros(N_COLS, N_COLS);
     for (cols, rows) in x.cols.iter().zip(&x.rows) {
         let w = 1.0 / rows.len().max(1) as f64;
-        let mut gl = vec![[0.0f64; N_COLS]; N_COLS];
-        let mut row = [0.0f64; N_COLS];
-        for j in 0..rows.len() {
-            for (k, c) in cols.iter().enumerate() {
-                row[k] = c[j];
-            }
-            row[COL_OFFSET] = 1.0;
-            for k in 0..=COL_OFFSET {
-                for l in 0..=k {
-                    gl[k][l] += row[k] * row[l];
-                }
-            }
+        // The record's design matrix (its columns, then the offset's ones) times itself: a
+        // blocked product (nalgebra's gemm), several times the speed of a row-by-row sum over
+        // the two hundred columns of the hysteresis basis.
+        let n = rows.len();
+        let mut m = DMatrix::<f64>::zeros(n, COL_OFFSET + 1);
+        for (k, c) in cols.iter().enumerate() {
+            m.column_mut(k).copy_from_slice(c);
         }
-        for k in 0..=COL_OFFSET {
-            for l in 0..=k {
-                g[(k, l)] += w * gl[k][l];
-                if l != k {
-                    g[(l, k)] += w * gl[k][l];
-                }
-            }
-        }
+        m.column_mut(COL_OFFSET).fill(1.0);
+        let gl = m.transpose() * &m;
+        let mut v = g.view_mut((0, 0), (COL_OFFSET + 1, COL_OFFSET + 1));
+        v += gl * w;
     }
     g
 }
@@ -365,6 +356,10 @@ fn fit_drift_poly(
         }
         let rows = &x.rows[r];
         let w = 1.0 / rows.len().max(1) as f64;
+        // The rows, row-major (the transposed design matrix), and the target: one blocked
+        // product at the end.
+        let mut ft: Vec<f64> = Vec::with_capacity(rows.len() * np);
+        let mut ev: Vec<f64> = Vec::with_capacity(rows.len());
         let mut next = 0usize;
         for i in 0..d.len() {
             if next < rows.len() && rows[next] == i {
@@ -376,13 +371,8 @@ fn fit_drift_poly(
                     row[6 + c] = self::col(&xs, y0, r, col, next);
                 }
                 next += 1;
-                let e = d.y_v[i] - y0[r][i];
-                for k in 0..np {
-                    b[k] += w * row[k] * e;
-                    for l in 0..=k {
-                        g[(k, l)] += w * row[k] * row[l];
-                    }
-                }
+                ft.extend_from_slice(&row);
+                ev.push(d.y_v[i] - y0[r][i]);
             }
             let u = d.u_v[i];
             for k in 0..3 {
@@ -392,11 +382,9 @@ fn fit_drift_poly(
                 }
             }
         }
-    }
-    for k in 0..np {
-        for l in 0..k {
-            g[(l, k)] = g[(k, l)];
-        }
+        let ft = DMatrix::from_column_slice(np, ev.len(), &ft);
+        g += (&ft * ft.transpose()) * w;
+        b.axpy(w, &(&ft * DVector::from_column_slice(&ev)), 1.0);
     }
     band_penalty(&mut g, &fixed, 6);
     ridge(&mut g);
@@ -448,7 +436,7 @@ fn fit_slow_linear(
         g[(COL_SGAIN, COL_OFFSET)] += gs;
         g[(COL_SGAIN, COL_SGAIN)] += w * dot(&s, &s);
     }
-    let solve = |idx: &[usize]| -> Option<(Vec<f64>, f64)> {
+    let solve = |idx: &[usize], warm: Option<&[bool]>| -> Option<(Vec<f64>, f64)> {
         let p = idx.len();
         let mut a = DMatrix::<f64>::zeros(p, p);
         let mut v = DVector::<f64>::zeros(p);
@@ -461,7 +449,7 @@ fn fit_slow_linear(
         band_penalty(&mut a, idx, 0);
         ridge(&mut a);
         let nonneg: Vec<bool> = idx.iter().map(|&k| is_nonneg_col(k)).collect();
-        let beta = nnls_normal(&a, &v, &nonneg)?;
+        let beta = nnls_normal_from(&a, &v, &nonneg, warm)?;
         // Reduction of the weighted SSR (at the constrained optimum too: x' A x = x' b there).
         let red = beta.dot(&v);
         beta.iter()
@@ -514,22 +502,48 @@ fn fit_slow_linear(
             .filter(|t| **t <= tau_max)
             .count()
             .max(3);
-        let mut best: Option<(f64, [usize; 3])> = None;
+        let mut best: Option<(f64, [usize; 3], Vec<f64>)> = None;
+        // Each solve starts from the previous one's positive set (the lags free): neighbouring
+        // triples share most of it.
+        let mut warm: Option<Vec<bool>> = None;
         for i in 0..n_tau {
             for j in i + 1..n_tau {
                 for k in j + 1..n_tau {
                     let mut idx = vec![i, j, k];
                     idx.extend(&fixed);
-                    if let Some((beta, red)) = solve(&idx) {
+                    if let Some((beta, red)) = solve(&idx, warm.as_deref()) {
+                        warm = Some(
+                            beta.iter()
+                                .enumerate()
+                                .map(|(p, v)| p < 3 || *v > 0.0)
+                                .collect(),
+                        );
                         let ok = beta.iter().take(3).all(|g| g.abs() <= 1.0);
                         if ok && best.as_ref().is_none_or(|b| red > b.0) {
-                            best = Some((red, [i, j, k]));
+                            best = Some((red, [i, j, k], beta));
                         }
                     }
                 }
             }
         }
-        let (_, ti) = best?;
+        let (_, ti, beta_grid) = best?;
+        // The refinement searches with the hysteresis radii the grid's best solve uses (all
+        // four bands of each, so the band penalty stays whole) and every other fixed column;
+        // the final solve has them all. A basis of 43 radii x 4 bands would otherwise make
+        // each of the refinement's few hundred solves a system of 180 columns.
+        let radius_of = |c: usize| (c - COL_HYST) / everett::HYST_BANDS;
+        let is_hyst = |c: usize| (COL_HYST..COL_HYST + HYST_COLS).contains(&c);
+        let used_radii: std::collections::BTreeSet<usize> = fixed
+            .iter()
+            .enumerate()
+            .filter(|&(p, &c)| is_hyst(c) && beta_grid[3 + p] != 0.0)
+            .map(|(_, &c)| radius_of(c))
+            .collect();
+        let fixed_search: Vec<usize> = fixed
+            .iter()
+            .copied()
+            .filter(|&c| !is_hyst(c) || used_radii.contains(&radius_of(c)))
+            .collect();
         // Refine the three time constants continuously (golden section on log tau between
         // the neighbouring grid values), each solve with the other columns.
         let grid = catalogue::DRIFT_TAU_GRID_S;
@@ -537,7 +551,7 @@ fn fit_slow_linear(
         // The search evaluates on evenly thinned rows (DRIFT_SEARCH_ROWS a record), the final
         // solve on all of them.
         let problem = DriftProblem::new(data, y0, x, &fixed, &g, &b, usize::MAX);
-        let search = DriftProblem::new(data, y0, x, &fixed, &g, &b, DRIFT_SEARCH_ROWS);
+        let search = DriftProblem::new(data, y0, x, &fixed_search, &g, &b, DRIFT_SEARCH_ROWS);
         let eval = |taus: &[f64; 3]| -> f64 {
             search.solve(taus).map_or(f64::NEG_INFINITY, |(beta, red)| {
                 if beta.iter().take(3).all(|g| g.abs() <= 1.0) {
@@ -609,7 +623,7 @@ fn fit_slow_linear(
         if fixed.is_empty() {
             return None;
         }
-        let (beta, _) = solve(&fixed)?;
+        let (beta, _) = solve(&fixed, None)?;
         Some(descale(unpack(&fixed, &beta, None)))
     }
 }
@@ -657,14 +671,14 @@ fn band_penalty(g: &mut DMatrix<f64>, cols: &[usize], at: usize) {
 }
 
 /// The drift refinement's fixed part, computed once per [`fit_slow`] call: per record the
-/// target and the fixed columns at the settled samples (row-major, for cache locality), and
+/// target and the fixed columns at the settled samples (as the transposed design matrix, columns x rows), and
 /// the weighted Gram matrix of the fixed columns, so that each evaluation only runs the three
 /// lags and their cross products.
 struct DriftProblem<'a> {
     data: &'a [Data],
     /// Per record: the lags' input (`K(u) u`).
     drive: &'a [Vec<f64>],
-    /// Per record: (weight, settled sample indices, target at them, fixed columns row-major).
+    /// Per record: (weight, settled sample indices, target at them, fixed columns as a columns x rows matrix).
     recs: Vec<DriftRecord>,
     /// The fixed columns (indices into the regressors).
     fixed: Vec<usize>,
@@ -673,11 +687,13 @@ struct DriftProblem<'a> {
     /// Weighted Gram matrix of the fixed columns, and their weighted products with the target.
     g_ff: DMatrix<f64>,
     b_f: DVector<f64>,
+    /// The last solve's positive set, the next one's start ([`nnls_normal_from`]).
+    warm: std::cell::RefCell<Option<Vec<bool>>>,
 }
 
 /// One record of a [`DriftProblem`]: (weight, settled sample indices, target at them, fixed
-/// columns row-major).
-type DriftRecord = (f64, Vec<usize>, Vec<f64>, Vec<f64>);
+/// columns as a columns x rows matrix).
+type DriftRecord = (f64, Vec<usize>, Vec<f64>, DMatrix<f64>);
 
 impl<'a> DriftProblem<'a> {
     /// The problem on the regressors' rows, evenly thinned to at most `max_rows` a record;
@@ -708,6 +724,7 @@ impl<'a> DriftProblem<'a> {
                 for &j in &js {
                     f.extend(fixed.iter().map(|&c| col(x, y0, r, c, j)));
                 }
+                let f = DMatrix::from_vec(nf, js.len(), f);
                 (w, idx, e, f)
             })
             .collect();
@@ -715,20 +732,9 @@ impl<'a> DriftProblem<'a> {
             let mut g_ff = DMatrix::<f64>::zeros(nf, nf);
             let mut b_f = DVector::<f64>::zeros(nf);
             for (w, _, e, f) in &recs {
-                for (j, ej) in e.iter().enumerate() {
-                    let row = &f[j * nf..(j + 1) * nf];
-                    for k in 0..nf {
-                        b_f[k] += w * row[k] * ej;
-                        for l in 0..=k {
-                            g_ff[(k, l)] += w * row[k] * row[l];
-                        }
-                    }
-                }
-            }
-            for k in 0..nf {
-                for l in 0..k {
-                    g_ff[(l, k)] = g_ff[(k, l)];
-                }
+                // The transposed design matrix times itself: a blocked product.
+                g_ff += (f * f.transpose()) * *w;
+                b_f.axpy(*w, &(f * DVector::from_column_slice(e)), 1.0);
             }
             (g_ff, b_f)
         } else {
@@ -745,6 +751,7 @@ impl<'a> DriftProblem<'a> {
             nf,
             g_ff,
             b_f,
+            warm: std::cell::RefCell::new(None),
         }
     }
 
@@ -762,8 +769,11 @@ impl<'a> DriftProblem<'a> {
             let a = taus.map(|tau| (-t / tau).exp());
             let mut lag = [drive[0]; 3];
             let mut ll = [[0.0f64; 3]; 3];
-            let mut lf = vec![0.0f64; 3 * nf];
             let mut le = [0.0f64; 3];
+            // The lags at the rows, column-major (rows x 3), for one blocked product with the
+            // fixed columns.
+            let n = idx.len();
+            let mut lags = DMatrix::<f64>::zeros(n, 3);
             let mut next = 0usize;
             for (j, &i) in idx.iter().enumerate() {
                 // Advance the lags to sample i (their value there uses inputs before i).
@@ -773,18 +783,20 @@ impl<'a> DriftProblem<'a> {
                     }
                     next += 1;
                 }
-                let row = &f[j * nf..(j + 1) * nf];
                 for k in 0..3 {
+                    lags[(j, k)] = lag[k];
                     le[k] += lag[k] * e[j];
                     for l in 0..=k {
                         ll[k][l] += lag[k] * lag[l];
                     }
-                    let out = &mut lf[k * nf..(k + 1) * nf];
-                    for (o, v) in out.iter_mut().zip(row) {
-                        *o += lag[k] * v;
-                    }
                 }
             }
+            // (nf x rows) (rows x 3): the fixed columns' products with the lags.
+            let lfm = f * &lags;
+            let lf: Vec<f64> = (0..3)
+                .flat_map(|k| (0..nf).map(move |c| (k, c)))
+                .map(|(k, c)| lfm[(c, k)])
+                .collect();
             for k in 0..3 {
                 bv[k] += w * le[k];
                 for l in 0..=k {
@@ -804,7 +816,14 @@ impl<'a> DriftProblem<'a> {
         let nonneg: Vec<bool> = (0..p)
             .map(|k| k < 3 || is_nonneg_col(self.fixed[k - 3]))
             .collect();
-        let beta = nnls_normal(&g, &bv, &nonneg)?;
+        let warm = self.warm.borrow().clone();
+        let beta = nnls_normal_from(&g, &bv, &nonneg, warm.as_deref())?;
+        *self.warm.borrow_mut() = Some(
+            beta.iter()
+                .enumerate()
+                .map(|(p, v)| p < 3 || *v > 0.0)
+                .collect(),
+        );
         let red = beta.dot(&bv);
         beta.iter()
             .all(|v| v.is_finite())
