@@ -852,13 +852,13 @@ fn single_sine_outcomes() -> Vec<(u64, Vec<String>, f64)> {
 }
 
 /// What the workflow achieves on the single-sine records today: hysteresis named, no
-/// slow effect but `nonlinear-gain` beside it, and the residual within 16x the floor
-/// (measured 10.6x and 9.0x, hysteresis alone, with the basis' radii at the table's
-/// resolution; with the fixed geometric radii before it 14.7x, and 6.2x with
-/// `nonlinear-gain` taking a 30 mV curvature the loop columns left; with the bands'
-/// reversible slopes fitted it was 7.1x and 6.3x, but the families suite lost 11 points of
-/// exact names; without a start memory and with the table ending at the records' extremes
-/// it was 33x and 26x).
+/// slow effect but `offset` or `nonlinear-gain` beside it, and the residual within 5x the
+/// floor. Measured 3.3x (hysteresis and offset, 27.0 mV for the truth's 25.5 mV) and 3.8x
+/// (hysteresis and `nonlinear-gain`) with the start candidate's depth refined; 10.6x and 9.0x
+/// with the candidates alone; with the fixed geometric radii before the basis followed the
+/// table 14.7x, and 6.2x with `nonlinear-gain`; with the bands' reversible slopes fitted
+/// 7.1x and 6.3x, but the families suite lost 11 points of exact names; without a start
+/// memory and with the table ending at the records' extremes 33x and 26x.
 #[test]
 fn single_sine_record_names_hysteresis_and_its_start() {
     for (seed, named, ratio) in single_sine_outcomes() {
@@ -872,16 +872,18 @@ fn single_sine_record_names_hysteresis_and_its_start() {
                 .all(|n| ["hysteresis", "offset", "nonlinear-gain"].contains(&n.as_str())),
             "seed {seed}: false name in {named:?}"
         );
-        assert!(ratio <= 16.0, "seed {seed}: final {ratio:.2}x the floor");
+        assert!(ratio <= 5.0, "seed {seed}: final {ratio:.2}x the floor");
     }
 }
 
 /// Issue #12's requirement on the single-sine record: hysteresis and offset named, the
-/// residual within 2x its floor. Not met yet (offset: the table's relays that never switch
-/// during the record make a constant of their own; 9-11x the floor is left, 56-59 % of it in the first
-/// second and at the sine's harmonics): run with `--ignored`.
+/// residual within 2x its floor. Not met yet (one seed names hysteresis and offset at 3.3x
+/// the floor, the other hysteresis and `nonlinear-gain` at 3.8x: the table's relays that
+/// never switch during the record make a constant of their own, and the truth's start, every
+/// operator centred on the first input, is not a memory one table can hold): run with
+/// `--ignored`.
 #[test]
-#[ignore = "issue #12: not met yet (hysteresis named, offset not, 9-11x the floor)"]
+#[ignore = "issue #12: not met yet (3.3x and 3.8x the floor, one seed without its offset)"]
 fn single_sine_record_names_hysteresis_and_offset() {
     for (seed, named, ratio) in single_sine_outcomes() {
         let mut named = named.clone();
