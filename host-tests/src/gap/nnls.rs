@@ -167,30 +167,26 @@ mod tests {
                     best = best.min(obj(&y));
                 }
             }
-            assert!(
-                (0..n).all(|j| !nonneg[j] || x[j] >= 0.0),
-                "case {case}: {x}"
-            );
-            assert!(
-                obj(&x) <= best + 1e-9 * best.abs().max(1.0),
-                "case {case}: {} vs brute force {best}",
-                obj(&x)
-            );
+            // Feasible and as good as the best feasible subset: the constrained optimum.
+            let check = |x: &DVector<f64>, label: &str| {
+                assert!(
+                    (0..n).all(|j| !nonneg[j] || x[j] >= 0.0),
+                    "case {case}{label}: {x}"
+                );
+                assert!(
+                    obj(x) <= best + 1e-9 * best.abs().max(1.0),
+                    "case {case}{label}: {} vs brute force {best}",
+                    obj(x)
+                );
+            };
+            check(&x, "");
             // Any guess of the free set reaches the same optimum.
             for guess in 0..4u32 {
                 let warm: Vec<bool> = (0..n)
                     .map(|j| (guess + case + j as u32).is_multiple_of(3))
                     .collect();
                 let xw = nnls_normal_from(&a, &b, &nonneg, Some(&warm)).expect("positive definite");
-                assert!(
-                    (0..n).all(|j| !nonneg[j] || xw[j] >= 0.0),
-                    "case {case} warm {warm:?}: {xw}"
-                );
-                assert!(
-                    obj(&xw) <= best + 1e-9 * best.abs().max(1.0),
-                    "case {case} warm {warm:?}: {} vs brute force {best}",
-                    obj(&xw)
-                );
+                check(&xw, &format!(" warm {warm:?}"));
             }
         }
     }
