@@ -11,7 +11,8 @@
 //! one agree again (the input has wiped the difference out; plus [`START_SETTLE_S`] for the
 //! plant to forget it), and the candidate that lowers the residual power there the most is
 //! taken; on a single record its excursions from the first input are then scaled to the
-//! depth that lowers it most ([`START_SCALE`]: the candidates are a coarse grid). The hysteresis basis is then recomputed from that memory and the slow effects
+//! depth that lowers it most ([`START_SCALE`]: the candidates are a coarse grid). The
+//! hysteresis basis is then recomputed from that memory and the slow effects
 //! refitted with it; the result is kept only if every record's residual is no worse and the
 //! total is lower. Two rounds (the refitted table can prefer another start).
 //!
@@ -42,8 +43,9 @@ const START_ROUNDS: usize = 2;
 /// the golden-section steps over it (our assumption: the candidates' depths are a factor 1.5
 /// to 2 apart, so 0.4..1.6 reaches past the neighbours; 12 steps resolve 0.1 % of the
 /// factor's range, each one head simulation).
-const START_SCALE: (f64, f64) = (0.4, 1.6);
-const START_SCALE_STEPS: usize = 12;
+pub const START_SCALE: (f64, f64) = (0.4, 1.6);
+/// Golden-section steps over [`START_SCALE`].
+pub const START_SCALE_STEPS: usize = 12;
 
 /// The result of a start search: the new regressors, model, simulations and mean squares.
 pub struct StartFit {
