@@ -382,9 +382,7 @@ fn fit_drift_poly(
                 }
             }
         }
-        let ft = DMatrix::from_column_slice(np, ev.len(), &ft);
-        g += (&ft * ft.transpose()) * w;
-        b.axpy(w, &(&ft * DVector::from_column_slice(&ev)), 1.0);
+        add_weighted_gram(&mut g, &mut b, &DMatrix::from_vec(np, ev.len(), ft), &ev, w);
     }
     band_penalty(&mut g, &fixed, 6);
     ridge(&mut g);
@@ -503,7 +501,7 @@ fn fit_slow_linear(
             .count()
             .max(3);
         let mut best: Option<(f64, [usize; 3], Vec<f64>)> = None;
-        // Each solve starts from the previous one's positive set (the lags free): neighbouring
+        // Each solve starts from the previous one's positive set ([`warm_set`]): neighbouring
         // triples share most of it.
         let mut warm: Option<Vec<bool>> = None;
         for i in 0..n_tau {
@@ -512,12 +510,7 @@ fn fit_slow_linear(
                     let mut idx = vec![i, j, k];
                     idx.extend(&fixed);
                     if let Some((beta, red)) = solve(&idx, warm.as_deref()) {
-                        warm = Some(
-                            beta.iter()
-                                .enumerate()
-                                .map(|(p, v)| p < 3 || *v > 0.0)
-                                .collect(),
-                        );
+                        warm = Some(warm_set(&beta));
                         let ok = beta.iter().take(3).all(|g| g.abs() <= 1.0);
                         if ok && best.as_ref().is_none_or(|b| red > b.0) {
                             best = Some((red, [i, j, k], beta));
@@ -529,8 +522,8 @@ fn fit_slow_linear(
         let (_, ti, beta_grid) = best?;
         // The refinement searches with the hysteresis radii the grid's best solve uses (all
         // four bands of each, so the band penalty stays whole) and every other fixed column;
-        // the final solve has them all. A basis of 43 radii x 4 bands would otherwise make
-        // each of the refinement's few hundred solves a system of 180 columns.
+        // the final solve has them all (the basis' 22 radii x 4 bands would otherwise enter
+        // each of the refinement's few hundred solves).
         let radius_of = |c: usize| (c - COL_HYST) / everett::HYST_BANDS;
         let is_hyst = |c: usize| (COL_HYST..COL_HYST + HYST_COLS).contains(&c);
         let used_radii: std::collections::BTreeSet<usize> = fixed
@@ -670,15 +663,40 @@ fn band_penalty(g: &mut DMatrix<f64>, cols: &[usize], at: usize) {
     });
 }
 
+/// Adds `w` times the Gram matrix of a design matrix given transposed (`ft`, columns x rows)
+/// to `g`, and `w` times its products with the target `e` to `b`: blocked products
+/// (nalgebra's gemm), several times the speed of row-by-row sums over a hysteresis basis of a
+/// hundred columns.
+fn add_weighted_gram(
+    g: &mut DMatrix<f64>,
+    b: &mut DVector<f64>,
+    ft: &DMatrix<f64>,
+    e: &[f64],
+    w: f64,
+) {
+    *g += (ft * ft.transpose()) * w;
+    b.axpy(w, &(ft * DVector::from_column_slice(e)), 1.0);
+}
+
+/// The warm start ([`nnls_normal_from`]) a drift solve passes to the next: its three lags
+/// (first) free, the other columns where the solve left them positive.
+fn warm_set(beta: &[f64]) -> Vec<bool> {
+    beta.iter()
+        .enumerate()
+        .map(|(p, v)| p < 3 || *v > 0.0)
+        .collect()
+}
+
 /// The drift refinement's fixed part, computed once per [`fit_slow`] call: per record the
-/// target and the fixed columns at the settled samples (as the transposed design matrix, columns x rows), and
-/// the weighted Gram matrix of the fixed columns, so that each evaluation only runs the three
-/// lags and their cross products.
+/// target and the fixed columns at the settled samples (the transposed design matrix,
+/// columns x rows), and the weighted Gram matrix of the fixed columns, so that each evaluation
+/// only runs the three lags and their cross products.
 struct DriftProblem<'a> {
     data: &'a [Data],
     /// Per record: the lags' input (`K(u) u`).
     drive: &'a [Vec<f64>],
-    /// Per record: (weight, settled sample indices, target at them, fixed columns as a columns x rows matrix).
+    /// Per record: (weight, settled sample indices, target at them, fixed columns as a
+    /// columns x rows matrix).
     recs: Vec<DriftRecord>,
     /// The fixed columns (indices into the regressors).
     fixed: Vec<usize>,
@@ -732,9 +750,7 @@ impl<'a> DriftProblem<'a> {
             let mut g_ff = DMatrix::<f64>::zeros(nf, nf);
             let mut b_f = DVector::<f64>::zeros(nf);
             for (w, _, e, f) in &recs {
-                // The transposed design matrix times itself: a blocked product.
-                g_ff += (f * f.transpose()) * *w;
-                b_f.axpy(*w, &(f * DVector::from_column_slice(e)), 1.0);
+                add_weighted_gram(&mut g_ff, &mut b_f, f, e, *w);
             }
             (g_ff, b_f)
         } else {
@@ -792,11 +808,7 @@ impl<'a> DriftProblem<'a> {
                 }
             }
             // (nf x rows) (rows x 3): the fixed columns' products with the lags.
-            let lfm = f * &lags;
-            let lf: Vec<f64> = (0..3)
-                .flat_map(|k| (0..nf).map(move |c| (k, c)))
-                .map(|(k, c)| lfm[(c, k)])
-                .collect();
+            let lf = f * &lags;
             for k in 0..3 {
                 bv[k] += w * le[k];
                 for l in 0..=k {
@@ -806,8 +818,8 @@ impl<'a> DriftProblem<'a> {
                     }
                 }
                 for c in 0..nf {
-                    g[(k, 3 + c)] += w * lf[k * nf + c];
-                    g[(3 + c, k)] += w * lf[k * nf + c];
+                    g[(k, 3 + c)] += w * lf[(c, k)];
+                    g[(3 + c, k)] += w * lf[(c, k)];
                 }
             }
         }
@@ -818,12 +830,7 @@ impl<'a> DriftProblem<'a> {
             .collect();
         let warm = self.warm.borrow().clone();
         let beta = nnls_normal_from(&g, &bv, &nonneg, warm.as_deref())?;
-        *self.warm.borrow_mut() = Some(
-            beta.iter()
-                .enumerate()
-                .map(|(p, v)| p < 3 || *v > 0.0)
-                .collect(),
-        );
+        *self.warm.borrow_mut() = Some(warm_set(beta.as_slice()));
         let red = beta.dot(&bv);
         beta.iter()
             .all(|v| v.is_finite())

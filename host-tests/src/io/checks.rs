@@ -72,11 +72,15 @@ pub fn first_non_finite(v: &[f64]) -> Option<(usize, f64)> {
 /// The bound on stage steps per run: `PIEZO_MAX_STEPS` if set to a positive integer, else
 /// [`DEFAULT_MAX_STAGE_STEPS`].
 pub fn max_stage_steps() -> u64 {
+    steps_from_env().unwrap_or(DEFAULT_MAX_STAGE_STEPS)
+}
+
+/// `PIEZO_MAX_STEPS`, when set to a positive integer.
+fn steps_from_env() -> Option<u64> {
     std::env::var(MAX_STEPS_ENV)
         .ok()
         .and_then(|s| s.trim().parse::<u64>().ok())
         .filter(|&n| n > 0)
-        .unwrap_or(DEFAULT_MAX_STAGE_STEPS)
 }
 
 /// Stage steps needed to cover `span_s` seconds at the step `period_s` (saturating; a
@@ -125,11 +129,7 @@ pub const GAP_MAX_STEPS_PER_PASS: u64 = 20_000_000;
 /// The bound on `piezo gap`'s stage steps over all its passes: `PIEZO_MAX_STEPS` if set to a
 /// positive integer, else [`GAP_MAX_STEPS_PER_PASS`] times [`GAP_RUNS_PER_RECORD`].
 pub fn gap_max_stage_steps() -> u64 {
-    std::env::var(MAX_STEPS_ENV)
-        .ok()
-        .and_then(|s| s.trim().parse::<u64>().ok())
-        .filter(|&n| n > 0)
-        .unwrap_or(GAP_MAX_STEPS_PER_PASS * GAP_RUNS_PER_RECORD)
+    steps_from_env().unwrap_or(GAP_MAX_STEPS_PER_PASS * GAP_RUNS_PER_RECORD)
 }
 
 /// Bounds `piezo gap`'s work before it starts: `records` are (name, samples, span in

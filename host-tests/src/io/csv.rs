@@ -316,8 +316,7 @@ impl Record {
             r_v,
             original_jitter: None,
         };
-        rec.check_time(&|i| At::Element(i + 1))?;
-        rec.retime();
+        rec.settle_time(&|i| At::Element(i + 1))?;
         Ok(rec)
     }
 
@@ -371,6 +370,14 @@ impl Record {
             *t = t0 + i as f64 * period;
         }
         self.original_jitter = Some(j);
+    }
+
+    /// The times checked ([`Self::check_time`]) and, if rounded or jittery, made uniform
+    /// ([`Self::retime`]): the last step of making a record, from columns or from a file.
+    fn settle_time(&mut self, at: &dyn Fn(usize) -> At) -> Result<(), RecordError> {
+        self.check_time(at)?;
+        self.retime();
+        Ok(())
     }
 
     fn check_time(&self, at: &dyn Fn(usize) -> At) -> Result<(), RecordError> {
@@ -519,8 +526,7 @@ impl Record {
             r_v: ir.map(|_| r_v),
             original_jitter: None,
         };
-        rec.check_time(&|i| At::Line(lines.get(i).copied().unwrap_or(0)))?;
-        rec.retime();
+        rec.settle_time(&|i| At::Line(lines.get(i).copied().unwrap_or(0)))?;
         Ok(rec)
     }
 
