@@ -13,21 +13,24 @@ use std::time::Instant;
 fn main() {
     let truth = demo_truth(3);
     let stage = truth.build_stage().expect("truth");
-    let mut data = Vec::new();
+    let mut records = Vec::new();
     for (name, (t, u)) in [
         ("fast", protocol::fast_input(50_000.0, 0.2)),
         ("slow", protocol::slow_input(1_000.0, 150.0)),
     ] {
         let y = simulate(&stage, truth.period_s, &t, &u);
-        data.push(
-            Data::from_record(name, Record::new(t, u, Some(y), None).expect("record"))
-                .expect("data"),
-        );
+        records.push((name, Record::new(t, u, Some(y), None).expect("record")));
     }
     let base = ModelFile::built_in("thesis-linear").expect("built-in");
     let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
     let mut times = Vec::new();
     for _ in 0..3 {
+        // Fresh records each time: a record keeps the simulations run on it (`Data::memo`),
+        // and a repetition must not start from the last one's.
+        let data: Vec<Data> = records
+            .iter()
+            .map(|(name, r)| Data::from_record(name, r.clone()).expect("data"))
+            .collect();
         let t0 = Instant::now();
         let d = diagnose(&base, &data, &Options::default()).expect("diagnosis");
         let s = t0.elapsed().as_secs_f64();

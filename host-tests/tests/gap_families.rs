@@ -21,7 +21,8 @@
 //! The hysteresis, creep and static map are applied to the input (in that order, creep on the
 //! raw input) before the truth's `thesis-linear` stage; every record has 1 mV of sensor noise.
 //! The workflow starts from `thesis-linear` and is told nothing else. A case is exact when the
-//! named set equals the truth's set of catalogue names. `GAP_DEBUG=1` prints each case's table.
+//! named set equals the truth's set of catalogue names. `GAP_DEBUG=1` prints each case's table;
+//! `GAP_DUMP=DIR` writes each case's records to `DIR/SEED-NAME.csv` (for `piezo gap`).
 
 mod families;
 
@@ -225,6 +226,13 @@ impl Case {
                     &self.predistort(&r.t_s, &r.u_v),
                 );
                 let rec = Record::new(r.t_s.clone(), r.u_v.clone(), Some(y), None).expect("record");
+                // `GAP_DUMP=DIR` writes the case's records as CSV, for `piezo gap` and its
+                // report.
+                if let Ok(dir) = std::env::var("GAP_DUMP") {
+                    let path =
+                        std::path::Path::new(&dir).join(format!("{}-{}.csv", self.seed, r.name));
+                    rec.write(&path).expect("GAP_DUMP: write the record");
+                }
                 Data::from_record(&r.name, rec).expect("record loads")
             })
             .collect()

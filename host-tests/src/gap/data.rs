@@ -16,6 +16,8 @@ use crate::io::model_file::ModelFile;
 use crate::sim::open_loop::simulate_after;
 use crate::util::median;
 use anyhow::{Context, bail, ensure};
+use std::collections::VecDeque;
+use std::sync::{Arc, Mutex};
 
 /// One measured record ready for the workflow.
 #[derive(Clone, Debug)]
@@ -32,6 +34,66 @@ pub struct Data {
     /// ([`hold_band_v`]): 1 nV for an input logged as the exact command, wider when the input
     /// was measured with noise.
     pub hold_band_v: f64,
+    /// The simulations of this record already run ([`sim`] looks here first).
+    pub memo: SimMemo,
+}
+
+/// Simulations already run on one record, by model: the workflow simulates one model on one
+/// record more than once (the model without slow effects at each step and in each pruning
+/// trial, a candidate the fast search lands on again, a pruned model that is an earlier
+/// step's), and a simulation at the 50 kHz step is its costliest part (measured on the gap
+/// bench: 195 of the 340 simulations of a diagnosis repeat an earlier one, 4.1 s of its 10.6 s
+/// of simulation). Keyed by the model's whole TOML text and a fingerprint of the record's
+/// input, so a hit is the same simulation, not a near one; the oldest entries go first
+/// beyond [`SIM_MEMO_ENTRIES`]. Clones of a record share it.
+#[derive(Clone, Default)]
+pub struct SimMemo(Arc<Mutex<VecDeque<MemoEntry>>>);
+
+/// One simulation a [`SimMemo`] keeps: the model's TOML text, the input's fingerprint, the
+/// simulated output.
+type MemoEntry = (String, u64, Arc<Vec<f64>>);
+
+impl std::fmt::Debug for SimMemo {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let n = self.0.lock().map_or(0, |q| q.len());
+        write!(f, "SimMemo({n} simulations)")
+    }
+}
+
+/// Simulations a record's [`SimMemo`] keeps (our assumption: a step's candidates, its
+/// pruning trials and the start search's simulations fit; 32 simulations of a 10 s record at
+/// 50 kHz take 128 MB).
+pub const SIM_MEMO_ENTRIES: usize = 32;
+
+impl SimMemo {
+    fn get(&self, key: &str, input: u64) -> Option<Arc<Vec<f64>>> {
+        let q = self.0.lock().ok()?;
+        q.iter()
+            .find(|(k, i, _)| *i == input && k == key)
+            .map(|(_, _, y)| Arc::clone(y))
+    }
+
+    fn put(&self, key: String, input: u64, y: Arc<Vec<f64>>) {
+        if let Ok(mut q) = self.0.lock() {
+            if q.iter().any(|(k, i, _)| *i == input && *k == key) {
+                return;
+            }
+            if q.len() >= SIM_MEMO_ENTRIES {
+                q.pop_front();
+            }
+            q.push_back((key, input, y));
+        }
+    }
+}
+
+/// A fingerprint of a record's times and input (FNV-1a over their bits): the memo's guard
+/// against a record whose samples were changed after it was made.
+fn input_fingerprint(d: &Data) -> u64 {
+    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
+    for x in d.t_s.iter().chain(&d.u_v) {
+        h = (h ^ x.to_bits()).wrapping_mul(0x0000_0100_0000_01b3);
+    }
+    h
 }
 
 /// [`HOLD_BAND_SIGMAS`] times a robust estimate of the noise on the recorded input (median
@@ -79,6 +141,7 @@ impl Data {
             u_v: rec.u_v,
             y_v: y,
             hold_band_v,
+            memo: SimMemo::default(),
         })
     }
 
@@ -223,18 +286,24 @@ pub fn noise_floor(d: &Data) -> f64 {
         .fold(f64::INFINITY, f64::min)
 }
 
-/// Simulate `model` (without sensor noise) on a record.
+/// Simulate `model` (without sensor noise) on a record; a simulation the record's
+/// [`SimMemo`] holds is not run again.
 pub fn sim(model: &ModelFile, d: &Data) -> anyhow::Result<Vec<f64>> {
     let mut m = model.clone();
     m.converters.noise_v = 0.0;
+    // Without noise the seed changes nothing: one key for every seed.
+    m.converters.seed = 0;
+    let key = toml::to_string(&m).ok();
+    let input = input_fingerprint(d);
+    if let Some(y) = key.as_deref().and_then(|k| d.memo.get(k, input)) {
+        return Ok(y.as_ref().clone());
+    }
     let stage = m.build_stage()?;
-    Ok(simulate_after(
-        &stage,
-        m.period_s,
-        &m.start_history_v(),
-        &d.t_s,
-        &d.u_v,
-    ))
+    let y = simulate_after(&stage, m.period_s, &m.start_history_v(), &d.t_s, &d.u_v);
+    if let Some(k) = key {
+        d.memo.put(k, input, Arc::new(y.clone()));
+    }
+    Ok(y)
 }
 
 /// Read the records named on the command line: CSV or MATLAB v5 `.mat` (with `vars`).
@@ -260,4 +329,57 @@ pub fn load_data(paths: &[std::path::PathBuf], vars: Option<&str>) -> anyhow::Re
         out.push(Data::from_record(&name, rec)?);
     }
     Ok(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn sine_record() -> Data {
+        let t: Vec<f64> = (0..2000).map(|i| i as f64 * 1e-4).collect();
+        let u: Vec<f64> = t.iter().map(|&x| 5.0 + 4.0 * (20.0 * x).sin()).collect();
+        let y = vec![0.0; t.len()];
+        Data::from_record("sine", Record::new(t, u, Some(y), None).unwrap()).unwrap()
+    }
+
+    /// A memo hit is the simulation itself; a changed model or a changed input is simulated
+    /// afresh, never served an earlier one's output.
+    #[test]
+    fn the_memo_returns_only_the_same_simulation() {
+        let d = sine_record();
+        let m = ModelFile::built_in("thesis-linear").unwrap();
+        let first = sim(&m, &d).unwrap();
+        let again = sim(&m, &d).unwrap();
+        assert_eq!(first, again);
+        // Another model: another output (the sensor gain scales it by 1 %).
+        let mut m2 = m.clone();
+        m2.converters.sensor_gain = 1.01;
+        let scaled = sim(&m2, &d).unwrap();
+        let peak = first.iter().fold(0.0f64, |a, b| a.max(b.abs()));
+        assert!(
+            scaled
+                .iter()
+                .zip(&first)
+                .any(|(a, b)| (a - b).abs() > 1e-3 * peak)
+        );
+        // The same record with its input changed after it was made: simulated afresh.
+        let mut d2 = d.clone();
+        for u in d2.u_v.iter_mut() {
+            *u *= 0.5;
+        }
+        let halved = sim(&m, &d2).unwrap();
+        let fresh = {
+            let mut d3 = sine_record();
+            d3.u_v.clone_from(&d2.u_v);
+            d3.memo = SimMemo::default();
+            sim(&m, &d3).unwrap()
+        };
+        assert_eq!(halved, fresh);
+        assert!(
+            halved
+                .iter()
+                .zip(&first)
+                .any(|(a, b)| (a - b).abs() > 0.1 * peak)
+        );
+    }
 }

@@ -786,10 +786,11 @@ impl<'a> DriftProblem<'a> {
             let mut lag = [drive[0]; 3];
             let mut ll = [[0.0f64; 3]; 3];
             let mut le = [0.0f64; 3];
-            // The lags at the rows, column-major (rows x 3), for one blocked product with the
-            // fixed columns.
-            let n = idx.len();
-            let mut lags = DMatrix::<f64>::zeros(n, 3);
+            // The fixed columns' products with the lags, accumulated as the lags advance: one
+            // pass over the fixed columns (stored column by column, `nf` values a row), which
+            // are megabytes a record and bound the solve by memory, not by arithmetic.
+            let mut lf = [vec![0.0f64; nf], vec![0.0f64; nf], vec![0.0f64; nf]];
+            let fs = f.as_slice();
             let mut next = 0usize;
             for (j, &i) in idx.iter().enumerate() {
                 // Advance the lags to sample i (their value there uses inputs before i).
@@ -800,15 +801,18 @@ impl<'a> DriftProblem<'a> {
                     next += 1;
                 }
                 for k in 0..3 {
-                    lags[(j, k)] = lag[k];
                     le[k] += lag[k] * e[j];
                     for l in 0..=k {
                         ll[k][l] += lag[k] * lag[l];
                     }
                 }
+                let fj = &fs[j * nf..(j + 1) * nf];
+                for (acc, l) in lf.iter_mut().zip(lag) {
+                    for (a, &x) in acc.iter_mut().zip(fj) {
+                        *a += x * l;
+                    }
+                }
             }
-            // (nf x rows) (rows x 3): the fixed columns' products with the lags.
-            let lf = f * &lags;
             for k in 0..3 {
                 bv[k] += w * le[k];
                 for l in 0..=k {
@@ -817,9 +821,9 @@ impl<'a> DriftProblem<'a> {
                         g[(l, k)] += w * ll[k][l];
                     }
                 }
-                for c in 0..nf {
-                    g[(k, 3 + c)] += w * lf[(c, k)];
-                    g[(3 + c, k)] += w * lf[(c, k)];
+                for (c, acc) in lf[k].iter().enumerate() {
+                    g[(k, 3 + c)] += w * acc;
+                    g[(3 + c, k)] += w * acc;
                 }
             }
         }

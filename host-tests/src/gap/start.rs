@@ -83,6 +83,7 @@ fn head(d: &Data, k: usize) -> Data {
         u_v: d.u_v[..k].to_vec(),
         y_v: d.y_v[..k].to_vec(),
         hold_band_v: d.hold_band_v,
+        memo: Default::default(),
     }
 }
 
