@@ -22,7 +22,7 @@
 //! raw input) before the truth's `thesis-linear` stage; every record has 1 mV of sensor noise.
 //! The workflow starts from `thesis-linear` and is told nothing else. A case is exact when the
 //! named set equals the truth's set of catalogue names. `GAP_DEBUG=1` prints each case's table;
-//! `GAP_DUMP=DIR` writes each case's records to `DIR/SEED-NAME.csv` (for `piezo gap`).
+//! `GAP_DUMP=DIR` writes each case's records to `DIR/SEED-NAME` (`1037-sine.csv`, for `piezo gap`).
 
 mod families;
 
@@ -229,8 +229,7 @@ impl Case {
                 // `GAP_DUMP=DIR` writes the case's records as CSV, for `piezo gap` and its
                 // report.
                 if let Ok(dir) = std::env::var("GAP_DUMP") {
-                    let path =
-                        std::path::Path::new(&dir).join(format!("{}-{}.csv", self.seed, r.name));
+                    let path = std::path::Path::new(&dir).join(format!("{}-{}", self.seed, r.name));
                     rec.write(&path).expect("GAP_DUMP: write the record");
                 }
                 Data::from_record(&r.name, rec).expect("record loads")

@@ -352,11 +352,29 @@ pub struct HystFit {
 }
 
 impl HystFit {
-    /// The `[hysteresis]` section: the Everett grid of `g u` plus the weighted basis.
+    /// The `[hysteresis]` section: the Everett grid of `g u` plus the weighted basis
+    /// ([`Self::grid_v`]), repaired into a table the stage accepts where it is not one
+    /// (`monotone`; a fit whose bands keep their loop weights within the reversible slope needs
+    /// no repair, see `slow_fit`'s validity penalty).
     pub fn section(&self, static_gain: f64) -> HysteresisSection {
         let range = self.range;
+        let e = monotone(self.grid_v(static_gain));
+        HysteresisSection {
+            input_range_v: [range.0, range.1],
+            offset_v: static_gain * range.0,
+            dc_gain: None,
+            loop_width_frac: None,
+            everett_v: Some(e),
+            start_turns_v: (!self.start_v.is_empty()).then(|| self.start_v.clone()),
+        }
+    }
+
+    /// The Everett grid of `g u` plus the weighted basis, before any repair:
+    /// `E(a, b) = g (a - b) + sum_k s_k |[b, a] ^ band_k| + sum_rk m_rk (T_rk - |[b, a] ^ band_k|)`.
+    pub fn grid_v(&self, static_gain: f64) -> Vec<f32> {
+        let range = self.range;
         let bands: Vec<(f64, f64)> = (0..HYST_BANDS).map(|k| band_v(range, k)).collect();
-        let e = grid(range, |a, b| {
+        grid(range, |a, b| {
             let mut v = static_gain * (a - b);
             for (k, band) in bands.iter().enumerate() {
                 v += self.weights[rev_col(k)] * l_k(a, b, *band);
@@ -371,16 +389,7 @@ impl HystFit {
                 }
             }
             v
-        });
-        let e = monotone(e);
-        HysteresisSection {
-            input_range_v: [range.0, range.1],
-            offset_v: static_gain * range.0,
-            dc_gain: None,
-            loop_width_frac: None,
-            everett_v: Some(e),
-            start_turns_v: (!self.start_v.is_empty()).then(|| self.start_v.clone()),
-        }
+        })
     }
 }
 
@@ -471,7 +480,7 @@ mod tests {
         assert!(swing > 0.5 * radius_v(range, 9), "column swing {swing}");
     }
 
-    /// No hysteresis: the section is the linear map, whatever the range.
+    /// A valid grid is kept as it is; an invalid one is lifted to the smallest valid grid.
     #[test]
     fn the_repaired_grid_is_a_valid_table_and_keeps_a_valid_one() {
         let range = (0.0, 10.0);
@@ -488,6 +497,65 @@ mod tests {
         let fixed = monotone(bad.clone());
         assert!(HysteresisTable::from_grid(0.0, 10.0, 0.0, &fixed).is_ok());
         assert!(fixed.iter().zip(&bad).all(|(f, b)| f >= b));
+    }
+
+    /// The validity rule `slow_fit` keeps: non-negative loop weights whose sum in each band
+    /// stays within the reversible slope give a grid the stage accepts with no repair (random
+    /// weights, every radius and band); a band whose weights exceed the slope by half gives a
+    /// grid that falls near its diagonal.
+    #[test]
+    fn loop_weights_within_the_reversible_slope_need_no_repair() {
+        use rand::{Rng, SeedableRng};
+        let g = params::PLANT_GAIN;
+        for seed in 0..20u64 {
+            let mut rng = rand::rngs::StdRng::seed_from_u64(seed);
+            let range = (rng.gen_range(-1.0..2.0), rng.gen_range(6.0..10.0));
+            let mut weights = vec![0.0; HYST_COLS];
+            for k in 0..HYST_BANDS {
+                let raw: Vec<f64> = (0..HYST_RADII)
+                    .map(|_| {
+                        if rng.gen_bool(0.4) {
+                            rng.gen_range(0.0..1.0)
+                        } else {
+                            0.0
+                        }
+                    })
+                    .collect();
+                let total: f64 = raw.iter().sum::<f64>().max(1e-9);
+                // Band sums from a tenth of the slope up to the whole of it.
+                let share = rng.gen_range(0.1..1.0) * g;
+                for (i, w) in raw.iter().enumerate() {
+                    weights[col(i, k)] = w / total * share;
+                }
+            }
+            let fit = HystFit {
+                range,
+                weights: weights.clone(),
+                start_v: vec![],
+            };
+            let raw = fit.grid_v(g);
+            assert_eq!(
+                monotone(raw.clone()),
+                raw,
+                "seed {seed}: a valid fit was repaired"
+            );
+            // Band 1 at 1.5 times the slope, on its narrowest radius: a falling branch.
+            for i in 0..HYST_RADII {
+                weights[col(i, 1)] = 0.0;
+            }
+            weights[col(0, 1)] = 1.5 * g;
+            let over = HystFit {
+                range,
+                weights,
+                start_v: vec![],
+            }
+            .grid_v(g);
+            assert_ne!(
+                monotone(over.clone()),
+                over,
+                "seed {seed}: an invalid fit passed"
+            );
+        }
     }
 
     #[test]

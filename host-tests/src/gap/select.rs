@@ -7,12 +7,12 @@
 use super::catalogue::{self, EFFECTS, FAST, SLOW};
 use super::constants::{
     CANNOT_TELL_RATIO, HOLD_MIN_S, MAX_STEPS, MIN_EXPLAINED, PRUNE_KEEP_EXCESS_VAR,
-    PRUNE_PER_PARAM, PRUNE_RATIO, STOP_FLOOR_RATIO,
+    PRUNE_PER_PARAM, PRUNE_RATIO, STATIC_TELL_RATIO, STOP_FLOOR_RATIO,
 };
 use super::data::{Data, min_max, mse, noise_floor, sim};
 use super::fast_fit::fit_fast;
 use super::signatures;
-use super::slow_fit::{SlowRegressors, fit_slow, slow_regressors};
+use super::slow_fit::{SlowRegressors, fit_slow, slow_regressors, solve_rows};
 use super::start;
 use super::unexplained::{Unexplained, locate};
 use crate::io::model_file::ModelFile;
@@ -102,18 +102,22 @@ impl Diagnosis {
     }
 }
 
-/// A named effect the records cannot tell from another: fitted in its place, the other
-/// leaves every record's residual within [`CANNOT_TELL_RATIO`] of the named one's.
+/// Two effects the records cannot tell apart. Either a named effect and another that, fitted
+/// in its place, leaves every record's residual within [`CANNOT_TELL_RATIO`] of the named
+/// one's; or two static shapes a step could add, each explaining nearly as much as the other
+/// ([`STATIC_TELL_RATIO`]), of which neither is named (`neither_named`).
 #[derive(Clone, Debug, serde::Serialize)]
 pub struct CannotTell {
-    /// The effect named.
+    /// The effect named (with `neither_named`: the one the step would have added).
     pub named: String,
     /// The effect the records cannot tell from it.
     pub alternative: String,
-    /// Final residual RMS over the records, volts.
+    /// Residual RMS over the records with `named`, volts (final, or the step's candidate's).
     pub rms_v: f64,
     /// Residual RMS with the alternative in the named effect's place, volts.
     pub alternative_rms_v: f64,
+    /// Neither effect was named: the records leave the choice between them to chance.
+    pub neither_named: bool,
     /// Why, and what record would tell them apart.
     pub why: String,
 }
@@ -157,6 +161,7 @@ fn cannot_tell(
             let r2 = CANNOT_TELL_RATIO * CANNOT_TELL_RATIO;
             let near = ms.iter().zip(cur_mse).all(|(a, b)| *a <= r2 * *b);
             near.then(|| CannotTell {
+                neither_named: false,
                 named: e.to_string(),
                 alternative: f.to_string(),
                 rms_v: rms(cur_mse),
@@ -172,6 +177,10 @@ fn cannot_tell(
         })
         .collect()
 }
+
+/// The static shapes of the sensor and the gain: a scale, an offset and a curvature of the
+/// output, which one sine or chirp beside a hysteresis loop can leave nearly collinear.
+const STATIC_SHAPES: [&str; 3] = ["offset", "sensor-gain", "nonlinear-gain"];
 
 /// A pruning trial: effect, model without it, its simulations and mean squares.
 type Trial = (Vec<String>, ModelFile, Vec<Vec<f64>>, Vec<f64>);
@@ -236,10 +245,12 @@ pub fn diagnose(base: &ModelFile, data: &[Data], opts: &Options) -> anyhow::Resu
         .map(|(d, s)| mse(&d.y_v, s))
         .collect();
     let base_sigs = signatures::compute(data, &sims, &noise);
-    let mut slow_x = slow_regressors(data, &[]);
+    let rows = solve_rows(data, base, &noise)?;
+    let mut slow_x = slow_regressors(data, rows, &[], base.plant.static_gain);
     let mut steps: Vec<Step> = Vec::new();
     let mut named: Vec<String> = Vec::new();
     let mut tried = Vec::new();
+    let mut ambiguous: Vec<CannotTell> = Vec::new();
 
     for _ in 0..MAX_STEPS {
         if let Some(b) = &bar {
@@ -315,6 +326,54 @@ pub fn diagnose(base: &ModelFile, data: &[Data], opts: &Options) -> anyhow::Resu
                 .map(|(c, s, e, ok)| (c.effect.clone(), *s, *e, *ok))
                 .collect(),
         );
+        // The static effects the records cannot tell apart: when the best admissible
+        // candidate is one of them and another explains nearly as much, neither is named (the
+        // records leave the choice to chance) and the pair is reported.
+        let best_effect = scored
+            .iter()
+            .filter(|x| x.3)
+            .min_by(|a, b| a.1.total_cmp(&b.1))
+            .map(|x| (x.0.effect.clone(), x.0.refit, x.2, rms_of(&x.0.mse)));
+        if let Some((e, false, ex, e_rms)) = best_effect
+            && STATIC_SHAPES.contains(&e.as_str())
+        {
+            let rivals: Vec<(String, f64, f64)> = scored
+                .iter()
+                .filter(|x| {
+                    !x.0.refit
+                        && x.0.effect != e
+                        && STATIC_SHAPES.contains(&x.0.effect.as_str())
+                        && (1.0 - x.2).max(1e-12) <= STATIC_TELL_RATIO * (1.0 - ex).max(1e-12)
+                })
+                .map(|x| (x.0.effect.clone(), x.2, rms_of(&x.0.mse)))
+                .collect();
+            if !rivals.is_empty() {
+                for (r, rx, r_rms) in &rivals {
+                    if !ambiguous.iter().any(|c: &CannotTell| {
+                        (c.named == e && c.alternative == *r)
+                            || (c.named == *r && c.alternative == e)
+                    }) {
+                        ambiguous.push(CannotTell {
+                            named: e.clone(),
+                            alternative: r.clone(),
+                            neither_named: true,
+                            rms_v: e_rms,
+                            alternative_rms_v: *r_rms,
+                            why: format!(
+                                "neither is named: {e} would explain {:.0} % of the residual power \
+                                 above the noise floor and {r} {:.0} %; records at several held \
+                                 levels (the recommended protocol) tell a scale, an offset and a \
+                                 curvature apart",
+                                100.0 * ex,
+                                100.0 * rx
+                            ),
+                        });
+                    }
+                }
+                let drop: Vec<String> = rivals.into_iter().map(|(r, _, _)| r).chain([e]).collect();
+                scored.retain(|x| x.0.refit || !drop.contains(&x.0.effect));
+            }
+        }
         let Some((best, score, explained, _)) = scored
             .into_iter()
             .filter(|x| x.3)
@@ -570,7 +629,8 @@ pub fn diagnose(base: &ModelFile, data: &[Data], opts: &Options) -> anyhow::Resu
             cur_mse = ms;
         }
     }
-    let cannot_tell = cannot_tell(&model, base, &named, data, &slow_x, u_range, &cur_mse);
+    let mut cannot_tell = cannot_tell(&model, base, &named, data, &slow_x, u_range, &cur_mse);
+    cannot_tell.extend(ambiguous);
     let unexplained = locate(data, &sims, &noise);
     if let Some(b) = &bar {
         b.finish_and_clear();
@@ -590,6 +650,11 @@ pub fn diagnose(base: &ModelFile, data: &[Data], opts: &Options) -> anyhow::Resu
         unexplained,
         cannot_tell,
     })
+}
+
+/// The residual RMS over records of per-record mean squares, volts.
+fn rms_of(mse: &[f64]) -> f64 {
+    (mse.iter().sum::<f64>() / mse.len().max(1) as f64).sqrt()
 }
 
 /// Is every record within [`STOP_FLOOR_RATIO`] of its noise floor?

@@ -25,7 +25,7 @@
 use super::data::{Data, mse, sim};
 use super::everett::start_candidates;
 use super::select::refit_slow;
-use super::slow_fit::{SlowRegressors, slow_regressors};
+use super::slow_fit::SlowRegressors;
 use crate::io::model_file::ModelFile;
 use crate::util::par_map;
 use model_core::hysteresis::{HysteresisMemory, HysteresisTable};
@@ -184,7 +184,7 @@ pub fn search(
             Some(cf) if gain_of(cf).is_some_and(|gf| gf < g) => cf,
             _ => c,
         };
-        let x2 = slow_regressors(data, c);
+        let x2 = slow_x.with_start(data, c);
         let mut m2 = model.clone();
         if let Some(h) = m2.hysteresis.as_mut() {
             h.start_turns_v = (!c.is_empty()).then(|| c.clone());
