@@ -852,9 +852,13 @@ fn single_sine_outcomes() -> Vec<(u64, Vec<String>, f64)> {
 }
 
 /// What the workflow achieves on the single-sine records today: hysteresis named, no
-/// slow effect but `offset` or `nonlinear-gain` beside it, and the residual within 5x the
-/// floor. Measured 3.3x (hysteresis and offset, 27.0 mV for the truth's 25.5 mV) and 3.8x
-/// (hysteresis and `nonlinear-gain`) with the start candidate's depth refined; 10.6x and 9.0x
+/// slow effect but `offset` or `nonlinear-gain` beside it, and the residual within 8x the
+/// floor. Measured 3.2x (hysteresis and offset, 26.9 mV for the truth's 25.5 mV) and 7.2x
+/// (hysteresis alone: `nonlinear-gain` and `sensor-gain` each explain 72-73 % of what the
+/// table leaves, so neither is named and the table says it cannot tell them apart, and the
+/// true offset is fitted and removed by the final check at 1.31x). Before static shapes that
+/// explain alike were left unnamed, 3.3x and 3.8x (the second with a `nonlinear-gain` the
+/// truth lacks) with the start candidate's depth refined; 10.6x and 9.0x
 /// with the candidates alone; with the fixed geometric radii before the basis followed the
 /// table 14.7x, and 6.2x with `nonlinear-gain`; with the bands' reversible slopes fitted
 /// 7.1x and 6.3x, but the families suite lost 11 points of exact names; without a start
@@ -872,7 +876,7 @@ fn single_sine_record_names_hysteresis_and_its_start() {
                 .all(|n| ["hysteresis", "offset", "nonlinear-gain"].contains(&n.as_str())),
             "seed {seed}: false name in {named:?}"
         );
-        assert!(ratio <= 5.0, "seed {seed}: final {ratio:.2}x the floor");
+        assert!(ratio <= 8.0, "seed {seed}: final {ratio:.2}x the floor");
     }
 }
 

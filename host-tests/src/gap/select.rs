@@ -327,8 +327,9 @@ pub fn diagnose(base: &ModelFile, data: &[Data], opts: &Options) -> anyhow::Resu
                 .collect(),
         );
         // The static effects the records cannot tell apart: when the best admissible
-        // candidate is one of them and another explains nearly as much, neither is named (the
-        // records leave the choice to chance) and the pair is reported.
+        // candidate is one of them and another both explains and leaves nearly as much
+        // (within STATIC_TELL_RATIO either way), neither is named (the records leave the
+        // choice to chance) and the pair is reported.
         let best_effect = scored
             .iter()
             .filter(|x| x.3)
@@ -343,6 +344,7 @@ pub fn diagnose(base: &ModelFile, data: &[Data], opts: &Options) -> anyhow::Resu
                     !x.0.refit
                         && x.0.effect != e
                         && STATIC_SHAPES.contains(&x.0.effect.as_str())
+                        && x.2 * STATIC_TELL_RATIO >= ex
                         && (1.0 - x.2).max(1e-12) <= STATIC_TELL_RATIO * (1.0 - ex).max(1e-12)
                 })
                 .map(|x| (x.0.effect.clone(), x.2, rms_of(&x.0.mse)))
