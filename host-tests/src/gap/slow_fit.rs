@@ -195,7 +195,7 @@ impl SlowRegressors {
     }
 }
 
-/// After the group delay ([`solve_rows`]), the stage's output may leave its quasi-static map by
+/// After the group delay (`solve_rows`), the stage's output may leave its quasi-static map by
 /// at most this many noise floors near a row the slow solve uses (our assumption: where the
 /// dynamics move the output off the delayed static map by `d`, a column of a tenth of the
 /// input's size is off by about a tenth of `d`, so 10 noise floors keep that error near the
@@ -248,7 +248,7 @@ pub(super) struct SolveRows {
     pub u_fit: Vec<Vec<f64>>,
 }
 
-/// Longest group delay [`solve_rows`] accepts, seconds (our assumption: the thesis stage's
+/// Longest group delay `solve_rows` accepts, seconds (our assumption: the thesis stage's
 /// is about 0.19 ms, plus half a sample of a 1 kHz record's hold; anything far longer is
 /// not a delay the static columns should follow).
 pub const MAX_GROUP_DELAY_S: f64 = 5e-3;
@@ -850,7 +850,7 @@ fn is_nonneg_col(k: usize) -> bool {
     k < N_TAU || (COL_HYST..COL_HYST + everett::HYST_LOOP_COLS).contains(&k)
 }
 
-/// Weight of the table-validity penalty of [`solve_slow`], in units of the data's own
+/// Weight of the table-validity penalty of `solve_slow`, in units of the data's own
 /// curvature along the penalised direction (our assumption: a band's loop weights then exceed
 /// the table's reversible slope by at most a thousandth of what the unconstrained fit would
 /// take, which the grid's repair ([`everett`]'s `monotone`) absorbs without a visible change,
