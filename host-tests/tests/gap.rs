@@ -602,10 +602,51 @@ fn a_residual_no_effect_explains_is_reported_as_unexplained() {
     assert!(j["unexplained"]["rms_v"].is_number() && j["unexplained"]["where"].is_string());
 }
 
+/// The thesis' own Everett table alone (`thesis-full` without drift, K'(u), slew limit and
+/// saturation; converters and 2.5 mV noise kept), diagnosed from `thesis-linear` on the
+/// identification protocol: a Preisach-class table whose major loop is centred exactly on the
+/// base's `0.79 u`, so a form the workflow claims to hold. Asserted: hysteresis alone named
+/// and the final residual within 2x the floor. **Not met** (issue #12): the hysteresis step
+/// leaves 121.5 mV (48x the floor); a `nonlinear-gain` and a -356 mV `offset` the truth lacks
+/// take it to 36.2 mV (14.4x). Session 10's probe of the basis against
+/// the table's static output: the loop-only split by centre band fixes the wrong centre line
+/// for a density that is not a PI's, four centre bands are too coarse for it, and the range
+/// margin loses the relays that switch at the records' extremes (GAP.md, session 9; the
+/// attempt is on branch `wip/everett-centre-line`).
+#[test]
+#[ignore = "issue #12: not met yet (14.4x the floor, nonlinear-gain and offset named falsely)"]
+fn the_thesis_table_alone_is_fitted_near_the_floor() {
+    let mut truth = ModelFile::built_in("thesis-full").unwrap();
+    truth.drift = None;
+    truth.nonlinear_gain = None;
+    truth.slew_rate_limit = None;
+    truth.saturation = None;
+    let stage = truth.build_stage().unwrap();
+    let mut data = Vec::new();
+    for (name, (t, u)) in [
+        ("fast.csv", protocol::fast_input(50_000.0, 0.2)),
+        ("slow.csv", protocol::slow_input(1_000.0, 40.0)),
+    ] {
+        let y = simulate(&stage, truth.period_s, &t, &u);
+        data.push(Data::from_record(name, Record::new(t, u, Some(y), None).unwrap()).unwrap());
+    }
+    let base = ModelFile::built_in("thesis-linear").unwrap();
+    let d = diagnose(&base, &data, &Options::default()).unwrap();
+    println!("{}", d.table());
+    assert_eq!(d.named, vec!["hysteresis".to_string()]);
+    assert!(
+        d.final_rms_v <= 2.0 * d.noise_floor_v,
+        "final {:.2} mV, {:.1}x the floor",
+        1e3 * d.final_rms_v,
+        d.final_rms_v / d.noise_floor_v
+    );
+}
+
 /// The full thesis stage (`thesis-full`: Everett hysteresis, drift with its K(u), K'(u), slew
-/// limit, saturation, 2.5 mV noise) diagnosed from `thesis-linear`. Its forms are not all in
-/// the catalogue's (the table is the thesis' congruent quadratic Everett function, its K(u)
-/// is held above 6 V), so the residual does not reach the floor, but the three slow effects
+/// limit, saturation, 2.5 mV noise) diagnosed from `thesis-linear`. Its K(u) is held above
+/// 6 V, which the catalogue's cubic on the records' range is not, and its table is not fitted
+/// well by the basis even alone (`the_thesis_table_alone_is_fitted_near_the_floor`), so the
+/// residual does not reach the floor, but the three slow effects
 /// must be named and kept, and the gap must shrink: measured 663 mV to 42.1 mV (15.8x, 16.8x
 /// the floor; 51.4 mV with the geometric radii before the basis followed the table), with a
 /// `sensor-gain` of the table's centre-line slope beside them (the loop-only table cannot
