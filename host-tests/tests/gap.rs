@@ -602,6 +602,22 @@ fn a_residual_no_effect_explains_is_reported_as_unexplained() {
     assert!(j["unexplained"]["rms_v"].is_number() && j["unexplained"]["where"].is_string());
 }
 
+/// `truth`'s identification records (0.2 s at 50 kHz, 40 s at 1 kHz, its own noise and seed)
+/// diagnosed from `thesis-linear`.
+fn diagnose_from_thesis_linear(truth: &ModelFile) -> gap::Diagnosis {
+    let stage = truth.build_stage().unwrap();
+    let mut data = Vec::new();
+    for (name, (t, u)) in [
+        ("fast.csv", protocol::fast_input(50_000.0, 0.2)),
+        ("slow.csv", protocol::slow_input(1_000.0, 40.0)),
+    ] {
+        let y = simulate(&stage, truth.period_s, &t, &u);
+        data.push(Data::from_record(name, Record::new(t, u, Some(y), None).unwrap()).unwrap());
+    }
+    let base = ModelFile::built_in("thesis-linear").unwrap();
+    diagnose(&base, &data, &Options::default()).unwrap()
+}
+
 /// The thesis' own Everett table alone (`thesis-full` without drift, K'(u), slew limit and
 /// saturation; converters and 2.5 mV noise kept), diagnosed from `thesis-linear` on the
 /// identification protocol: a Preisach-class table whose major loop is centred exactly on the
@@ -621,17 +637,7 @@ fn the_thesis_table_alone_is_fitted_near_the_floor() {
     truth.nonlinear_gain = None;
     truth.slew_rate_limit = None;
     truth.saturation = None;
-    let stage = truth.build_stage().unwrap();
-    let mut data = Vec::new();
-    for (name, (t, u)) in [
-        ("fast.csv", protocol::fast_input(50_000.0, 0.2)),
-        ("slow.csv", protocol::slow_input(1_000.0, 40.0)),
-    ] {
-        let y = simulate(&stage, truth.period_s, &t, &u);
-        data.push(Data::from_record(name, Record::new(t, u, Some(y), None).unwrap()).unwrap());
-    }
-    let base = ModelFile::built_in("thesis-linear").unwrap();
-    let d = diagnose(&base, &data, &Options::default()).unwrap();
+    let d = diagnose_from_thesis_linear(&truth);
     println!("{}", d.table());
     assert_eq!(d.named, vec!["hysteresis".to_string()]);
     assert!(
@@ -656,17 +662,7 @@ fn the_thesis_table_alone_is_fitted_near_the_floor() {
 #[test]
 fn full_thesis_stage_names_its_slow_effects() {
     let truth = ModelFile::built_in("thesis-full").unwrap();
-    let stage = truth.build_stage().unwrap();
-    let mut data = Vec::new();
-    for (name, (t, u)) in [
-        ("fast.csv", protocol::fast_input(50_000.0, 0.2)),
-        ("slow.csv", protocol::slow_input(1_000.0, 40.0)),
-    ] {
-        let y = simulate(&stage, truth.period_s, &t, &u);
-        data.push(Data::from_record(name, Record::new(t, u, Some(y), None).unwrap()).unwrap());
-    }
-    let base = ModelFile::built_in("thesis-linear").unwrap();
-    let d = diagnose(&base, &data, &Options::default()).unwrap();
+    let d = diagnose_from_thesis_linear(&truth);
     println!("{}", d.table());
     let base_rms = d.steps.first().map_or(d.final_rms_v, |s| s.rms_before_v);
     println!(
