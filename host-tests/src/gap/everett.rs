@@ -64,11 +64,23 @@ use model_core::hysteresis::{
 };
 use model_core::params;
 
-/// Bands along the Preisach plane's centre axis (our assumption: four resolve a loop that
-/// narrows or widens along the range, as the thesis' table and PI stages with
-/// input-dependent weights do, at four times the columns of a play sum; 44 grid intervals
-/// divide into four bands of 11).
-pub const HYST_BANDS: usize = 4;
+/// Bands along the Preisach plane's centre axis: the layout's capacity, the larger of the
+/// two splits' counts ([`CentreLine::bands`]); a split with fewer leaves the columns of the
+/// bands it does not use at zero and out of the solve.
+pub const HYST_BANDS: usize = HYST_BANDS_SPAN;
+
+/// Bands of the [`CentreLine::Band`] split (our assumption, measured: four resolve a loop
+/// that narrows or widens along the range, as PI stages with input-dependent weights do, at
+/// four times the columns of a play sum; 44 grid intervals divide into four bands of 11).
+/// Eleven made the hidden-effect suite's Bouc-Wen truths fit closer in sample and leave a
+/// leftover a false `offset` or `sensor-gain` took (five cases, 98.9 % -> 94.6 % exact).
+pub const HYST_BANDS_BAND: usize = 4;
+
+/// Bands of the [`CentreLine::Span`] split (our assumption, measured in session 11: the
+/// thesis' table, whose loop widens along its range, fitted by the basis alone on its static
+/// output over the identification protocol's slow record to 0.33 mV with eleven bands and
+/// the edge columns; 44 grid intervals divide into eleven bands of four).
+pub const HYST_BANDS_SPAN: usize = 11;
 
 /// Radii of the basis: one per odd multiple of half a grid interval up to the span's half
 /// ([`radius_v`]).
@@ -77,14 +89,30 @@ pub const HYST_RADII: usize = INTERVALS / 2;
 /// Loop columns of the basis: every (radius, band) pair, radius-major.
 pub const HYST_LOOP_COLS: usize = HYST_RADII * HYST_BANDS;
 
-/// Columns of the basis: the loop columns, then one reversible column per band
-/// ([`rev_col`]).
-pub const HYST_COLS: usize = HYST_LOOP_COLS + HYST_BANDS;
+/// Tents along each edge of the records' span that spread the edge relays' free thresholds
+/// ([`edge_col`]; our assumption: one every four grid intervals, the bands' resolution).
+pub const EDGE_TENTS: usize = (INTERVALS - 2 * EDGE_NODE) / 4 + 1;
+
+/// Edge-relay columns: [`EDGE_TENTS`] at the bottom of the span, then as many at its top.
+pub const HYST_EDGE_COLS: usize = 2 * EDGE_TENTS;
+
+/// Columns whose weights are kept non-negative (densities of relays): the loop columns and
+/// the edge columns.
+pub const HYST_NONNEG_COLS: usize = HYST_LOOP_COLS + HYST_EDGE_COLS;
+
+/// Columns of the basis: the loop columns, the edge columns, then one reversible column per
+/// band ([`rev_col`]).
+pub const HYST_COLS: usize = HYST_NONNEG_COLS + HYST_BANDS;
 
 /// Column index of band `k`'s reversible part (`clamp(u, band) - c_k`: a change of the
 /// reversible slope within the band; sign free).
 pub const fn rev_col(k: usize) -> usize {
-    HYST_LOOP_COLS + k
+    HYST_NONNEG_COLS + k
+}
+
+/// Column index of edge tent `k` at the bottom (`top == false`) or top of the span.
+pub const fn edge_col(top: bool, k: usize) -> usize {
+    HYST_LOOP_COLS + if top { EDGE_TENTS } else { 0 } + k
 }
 
 /// Are the reversible slopes of the bands fitted with the loop (`false`: their columns stay
@@ -102,7 +130,7 @@ pub const HYST_FIT_REVERSIBLE: bool = false;
 pub const HYST_FIT_COLS: usize = if HYST_FIT_REVERSIBLE {
     HYST_COLS
 } else {
-    HYST_LOOP_COLS
+    HYST_NONNEG_COLS
 };
 
 /// Weight of the smoothness penalty between adjacent bands of one radius, as a fraction of
@@ -112,28 +140,109 @@ pub const HYST_FIT_COLS: usize = if HYST_FIT_REVERSIBLE {
 /// asymmetric Everett truths, where it must not).
 pub const HYST_BAND_SMOOTH: f64 = 0.1;
 
+/// Which memoryless part a loop column leaves out: the centre line the fitted table keeps
+/// at the base model's `static_gain * u` is that of one of two splits of the same relays,
+/// and the records choose (`select`: the split whose hysteresis alone fits them better).
+///
+/// * [`CentreLine::Band`]: each band's relays less their reversible part `clamp(u, band)`.
+///   A Prandtl-Ishlinskii truth is exactly that (its play operators less `u`), and so is its
+///   loop's centre line, which bends within an operator's radius of the records' extremes.
+/// * [`CentreLine::Span`]: each element less its own centre line over the records' span (the
+///   mean of its major loop's rising and falling branches between the records' extremes): the
+///   loop of a table whose centre line over the records is straight, as the thesis' table's
+///   is over its 0..10 V (a uniform density over the Preisach triangle). Measured with the
+///   basis alone on that table's static output over the identification protocol's slow record:
+///   `Band` 14.5 mV, `Span` 0.3 mV; on two PI truths over a 1 Hz sine, `Band` 0.5 and 2.1 mV,
+///   `Span` 346 and 273 mV. Neither split serves both families.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum CentreLine {
+    /// Band relays less `clamp(u, band)`.
+    Band,
+    /// Each element less its centre line over the records' span.
+    Span,
+}
+
+impl CentreLine {
+    /// Bands along the centre axis this split uses ([`HYST_BANDS_BAND`],
+    /// [`HYST_BANDS_SPAN`]); the loop columns of the others stay zero.
+    pub const fn bands(self) -> usize {
+        match self {
+            CentreLine::Band => HYST_BANDS_BAND,
+            CentreLine::Span => HYST_BANDS_SPAN,
+        }
+    }
+
+    /// Does this split carry the edge columns ([`edge_col`]) on a range whose margin puts
+    /// the records' extremes on grid nodes ([`EDGE_NODE`])? The [`CentreLine::Span`] split
+    /// does: a table with a straight centre line that ends at the records' extremes has
+    /// relays switching exactly there. The [`CentreLine::Band`] split keeps the play basis'
+    /// 0.5 V margin ([`HYST_RANGE_MARGIN_V`]) without them, where PI truths fit it best.
+    pub const fn edges(self) -> bool {
+        matches!(self, CentreLine::Span)
+    }
+
+    /// Is basis column `c` one this split fits: the loop columns of the bands it uses
+    /// ([`Self::bands`]), the edge columns if it has them ([`Self::edges`]), and the
+    /// reversible ones if [`HYST_FIT_REVERSIBLE`].
+    pub const fn fits(self, c: usize) -> bool {
+        if c < HYST_LOOP_COLS {
+            c % HYST_BANDS < self.bands()
+        } else if c < HYST_NONNEG_COLS {
+            self.edges()
+        } else {
+            c < HYST_FIT_COLS
+        }
+    }
+}
+
 /// Grid intervals of the table.
 const INTERVALS: usize = GRID_NODES - 1;
-const _: () = assert!(INTERVALS.is_multiple_of(HYST_BANDS));
+const _: () = assert!(INTERVALS.is_multiple_of(HYST_BANDS_BAND));
+const _: () = assert!(INTERVALS.is_multiple_of(HYST_BANDS_SPAN));
+const _: () = assert!(HYST_BANDS_BAND <= HYST_BANDS && HYST_BANDS_SPAN <= HYST_BANDS);
 
-/// Margin of the table's range beyond the records' inputs, volts (our assumption, measured on
-/// the single-sine records of issue #12: without it a 1 Hz sine over 0.5..9.5 V of a PI truth
-/// was fitted to 170 mV, with 0.5 V to 16 mV before any start memory). A relay whose lower
-/// threshold lies below the records' lowest input never switches off during them (a stage
-/// whose earlier motion went lower keeps it on), and one whose upper threshold lies above
-/// their highest input never switches on. A table that ends at the records' extremes clips
-/// those relays onto its edges, where every visit switches them: the loop gets a drop at its
-/// ends that the stage does not have. The margin gives them room; whether they are on at the
-/// start is the start memory's part ([`start_candidates`]).
+/// Grid intervals of the table's range beyond each end of the records' inputs (our
+/// assumption, measured). A relay whose lower threshold lies below the records' lowest input
+/// never switches off during them (a stage whose earlier motion went lower keeps it on), and
+/// one whose upper threshold lies above their highest input never switches on. A table that
+/// ends at the records' extremes clips those relays onto its edges, where every visit
+/// switches them: the loop gets a drop at its ends that the stage does not have (a 1 Hz sine
+/// over 0.5..9.5 V of a PI truth was fitted to 170 mV; with a margin, 16 mV before any start
+/// memory). The margin gives them room; whether they are on at the start is the start
+/// memory's part ([`start_candidates`]). It is a whole number of grid intervals, so that the
+/// records' extremes are grid nodes: a stage's relays that switch exactly at those extremes
+/// (a table that ends there, as the thesis' does over its 0..10 V protocol) are the edge
+/// columns ([`edge_col`]), which the table's bilinear interpolation reads exactly only on a
+/// node. Measured on the thesis table's static output over the identification protocol's
+/// slow record (least squares of the basis alone): a margin of 0.5 V and no edge columns
+/// left 126 mV, two intervals and the edge columns 14.5 mV (with [`HYST_BANDS`] at 11).
+pub const EDGE_NODE: usize = 2;
+
+/// Margin of the table's range beyond the records' inputs for the [`CentreLine::Band`]
+/// split, volts (our assumption, measured on the single-sine records of issue #12: without it
+/// a 1 Hz sine over 0.5..9.5 V of a PI truth was fitted to 170 mV, with 0.5 V to 16 mV before
+/// any start memory; the split has no edge columns, see [`EDGE_NODE`] for why the margin).
+/// With the [`CentreLine::Span`] split's node margin and edge columns instead, the same
+/// records ended at 6.8x and 6.3x the floor against 3.2x and 7.2x.
 pub const HYST_RANGE_MARGIN_V: f64 = 0.5;
 
-/// The table's input range for records whose inputs span `lo..hi` volts: that span widened by
-/// [`HYST_RANGE_MARGIN_V`] each side, kept within the amplifier's input range and at least
-/// 1 V wide.
-pub fn hyst_range(lo: f64, hi: f64) -> (f64, f64) {
-    let lo =
-        (lo - HYST_RANGE_MARGIN_V).clamp(params::AMP_INPUT_MIN_V, params::AMP_INPUT_MAX_V - 1.0);
-    let hi = (hi + HYST_RANGE_MARGIN_V).clamp(lo + 1.0, params::AMP_INPUT_MAX_V);
+/// The table's input range for records whose inputs span `lo..hi` volts, kept within the
+/// amplifier's input range and at least 1 V wide: for the [`CentreLine::Span`] split that
+/// span widened by [`EDGE_NODE`] grid intervals each side (so `lo` and `hi` are nodes
+/// `EDGE_NODE` and `INTERVALS - EDGE_NODE`), for the [`CentreLine::Band`] split by
+/// [`HYST_RANGE_MARGIN_V`].
+pub fn hyst_range(lo: f64, hi: f64, form: CentreLine) -> (f64, f64) {
+    if !form.edges() {
+        let lo = (lo - HYST_RANGE_MARGIN_V)
+            .clamp(params::AMP_INPUT_MIN_V, params::AMP_INPUT_MAX_V - 1.0);
+        let hi = (hi + HYST_RANGE_MARGIN_V).clamp(lo + 1.0, params::AMP_INPUT_MAX_V);
+        return (lo, hi);
+    }
+    let hi = hi.max(lo + 0.9);
+    let d = (hi - lo) / (INTERVALS - 2 * EDGE_NODE) as f64;
+    let m = EDGE_NODE as f64 * d;
+    let lo = (lo - m).clamp(params::AMP_INPUT_MIN_V, params::AMP_INPUT_MAX_V - 1.0);
+    let hi = (hi + m).clamp(lo + 1.0, params::AMP_INPUT_MAX_V);
     (lo, hi)
 }
 
@@ -183,9 +292,9 @@ fn node_v(range: (f64, f64), i: usize) -> f64 {
     range.0 + (range.1 - range.0) * i as f64 / INTERVALS as f64
 }
 
-/// Edges of band `k`, volts.
-fn band_v(range: (f64, f64), k: usize) -> (f64, f64) {
-    let per = INTERVALS / HYST_BANDS;
+/// Edges of band `k` of `bands`, volts.
+fn band_v(range: (f64, f64), k: usize, bands: usize) -> (f64, f64) {
+    let per = INTERVALS / bands;
     (node_v(range, k * per), node_v(range, (k + 1) * per))
 }
 
@@ -213,6 +322,61 @@ fn t_rk(a: f64, b: f64, r: f64, band: (f64, f64), range: (f64, f64)) -> f64 {
 /// The reversible part of the band's relays at `(a, b)`: the length of `[b, a]` inside it.
 fn l_k(a: f64, b: f64, band: (f64, f64)) -> f64 {
     (band.1.min(a) - band.0.max(b)).max(0.0)
+}
+
+/// The integral over `[x0, x1]` of edge tent `k`: the hat of half-width four grid intervals
+/// centred on node `EDGE_NODE + 4 k`, cut to the span `[node EDGE_NODE, node INTERVALS -
+/// EDGE_NODE]`.
+fn edge_tent_integral(x0: f64, x1: f64, k: usize, range: (f64, f64)) -> f64 {
+    let lo = node_v(range, EDGE_NODE);
+    let hi = node_v(range, INTERVALS - EDGE_NODE);
+    let h = 4.0 * (range.1 - range.0) / INTERVALS as f64;
+    let m = node_v(range, EDGE_NODE + 4 * k);
+    let x0 = x0.max(lo).max(m - h);
+    let x1 = x1.min(hi).min(m + h);
+    if x1 <= x0 {
+        return 0.0;
+    }
+    // The hat's antiderivative, 0 at m - h.
+    let f = |x: f64| {
+        let d = x - m;
+        if d <= 0.0 {
+            (d + h) * (d + h) / (2.0 * h)
+        } else {
+            h - (h - d) * (h - d) / (2.0 * h)
+        }
+    };
+    f(x1) - f(x0)
+}
+
+/// The relay mass of edge tent `k` (its integral over the span), input volts.
+fn edge_mass(k: usize, range: (f64, f64)) -> f64 {
+    edge_tent_integral(f64::NEG_INFINITY, f64::INFINITY, k, range)
+}
+
+/// Edge tent `k`'s Everett function at `(a, b)`: relays that switch off exactly at the span's
+/// bottom (`top == false`: `beta` on node `EDGE_NODE`, `alpha` spread by the tent) or on
+/// exactly at its top (`alpha` on node `INTERVALS - EDGE_NODE`, `beta` spread). A table that
+/// ends at the records' extremes, as a stage's own table may, has such relays on its edges
+/// (the relays beyond its range, clipped onto them); the play basis, whose relays switch
+/// at `c +- r`, reaches those lines only at single points.
+fn t_edge(a: f64, b: f64, top: bool, k: usize, range: (f64, f64)) -> f64 {
+    let eps = 1e-9 * (range.1 - range.0);
+    if top {
+        let hi = node_v(range, INTERVALS - EDGE_NODE);
+        if a >= hi - eps {
+            edge_tent_integral(b, hi, k, range)
+        } else {
+            0.0
+        }
+    } else {
+        let lo = node_v(range, EDGE_NODE);
+        if b <= lo + eps {
+            edge_tent_integral(lo, a, k, range)
+        } else {
+            0.0
+        }
+    }
 }
 
 /// The grid of `f(a, b)` at the nodes, packed.
@@ -280,35 +444,45 @@ pub fn radius_v(range: (f64, f64), i: usize) -> f64 {
 
 /// The loop-only columns at `rows` of a record with inputs `u_v`: for each (radius, band)
 /// the table's response minus the band's reversible part (zero for radii not used).
-pub fn columns(u_v: &[f64], rows: &[usize], range: (f64, f64), start_v: &[f64]) -> Vec<Vec<f64>> {
+pub fn columns(
+    u_v: &[f64],
+    rows: &[usize],
+    range: (f64, f64),
+    start_v: &[f64],
+    form: CentreLine,
+) -> Vec<Vec<f64>> {
     let start: Vec<f32> = start_v.iter().map(|&v| v as f32).collect();
     let mut out = vec![vec![0.0; rows.len()]; HYST_COLS];
     for i in 0..HYST_RADII {
-        let r = radius_v(range, i);
-        for k in 0..HYST_BANDS {
-            let band = band_v(range, k);
-            let e = grid(range, |a, b| t_rk(a, b, r, band, range));
-            let Ok(t) = HysteresisTable::from_grid(range.0 as f32, range.1 as f32, 0.0, &e) else {
-                continue;
-            };
-            let mut mem = HysteresisMemory::new();
-            mem.reset_after(&t, &start, u_v[0] as f32);
-            let c = &mut out[col(i, k)];
-            // (the reversible columns are filled below)
-            let mut next = 0usize;
-            let mut y = mem.output_v();
-            for (j, &row) in rows.iter().enumerate() {
-                while next <= row {
-                    y = t.forward(&mut mem, u_v[next] as f32);
-                    next += 1;
-                }
-                let u = u_v[row].clamp(range.0, range.1);
-                c[j] = y as f64 - (u.clamp(band.0, band.1) - band.0);
-            }
+        for k in 0..form.bands() {
+            let (e, rev) = element(range, i, k, form);
+            table_column(&e, range, &start, u_v, rows, rev, &mut out[col(i, k)]);
+        }
+    }
+    // The edge relays enter as a relay density >= 0 on the span's edges, their reversible part
+    // not taken out (their weights move the table's centre line near the span's ends, where a
+    // table that ends there bends it). The bottom ones are on whenever the input has risen
+    // past their upper threshold since it last touched the bottom, most of a record: their
+    // columns are the relays less their mass (zero when all are on), and the table's offset
+    // carries the mass ([`HystFit::section`]), so that they do not make a constant the
+    // `offset` then takes back.
+    for top in [false, true].into_iter().filter(|_| form.edges()) {
+        for k in 0..EDGE_TENTS {
+            let e = grid(range, |a, b| t_edge(a, b, top, k, range));
+            let on = if top { 0.0 } else { edge_mass(k, range) };
+            table_column(
+                &e,
+                range,
+                &start,
+                u_v,
+                rows,
+                |_| on,
+                &mut out[edge_col(top, k)],
+            );
         }
     }
     for k in 0..HYST_BANDS {
-        let band = band_v(range, k);
+        let band = band_v(range, k, HYST_BANDS);
         out[rev_col(k)] = rows
             .iter()
             .map(|&row| u_v[row].clamp(range.0, range.1).clamp(band.0, band.1) - band.0)
@@ -317,15 +491,107 @@ pub fn columns(u_v: &[f64], rows: &[usize], range: (f64, f64), start_v: &[f64]) 
     out
 }
 
+/// Points per grid interval at which a [`CentreLine::Span`] centre line is sampled (our
+/// assumption: the table is bilinear between nodes, so its branches are smooth within an
+/// interval and eight points follow them to well below the records' noise).
+const CENTRE_POINTS_PER_INTERVAL: usize = 8;
+
+/// Loop element (radius `i`, band `k`): its Everett grid and the memoryless part its column
+/// leaves out (`rev(u)`, zero at the bottom of `range`... or its value there, which the
+/// table's offset carries: [`HystFit::section`]).
+fn element(
+    range: (f64, f64),
+    i: usize,
+    k: usize,
+    form: CentreLine,
+) -> (Vec<f32>, Box<dyn Fn(f64) -> f64>) {
+    let r = radius_v(range, i);
+    let band = band_v(range, k, form.bands());
+    let e = grid(range, |a, b| t_rk(a, b, r, band, range));
+    let rev: Box<dyn Fn(f64) -> f64> = match form {
+        CentreLine::Band => {
+            Box::new(move |u: f64| u.clamp(range.0, range.1).clamp(band.0, band.1) - band.0)
+        }
+        CentreLine::Span => centre_line(&e, range),
+    };
+    (e, rev)
+}
+
+/// The centre line over the records' span (nodes `EDGE_NODE` to `INTERVALS - EDGE_NODE`) of
+/// the table with grid `e` over `range`: the mean of its rising branch from the span's bottom
+/// and its falling branch from the span's top, held constant beyond the span.
+fn centre_line(e: &[f32], range: (f64, f64)) -> Box<dyn Fn(f64) -> f64> {
+    let lo = node_v(range, EDGE_NODE);
+    let hi = node_v(range, INTERVALS - EDGE_NODE);
+    let n = CENTRE_POINTS_PER_INTERVAL * (INTERVALS - 2 * EDGE_NODE);
+    let Ok(t) = HysteresisTable::from_grid(range.0 as f32, range.1 as f32, 0.0, e) else {
+        return Box::new(|_| 0.0);
+    };
+    let us: Vec<f64> = (0..=n)
+        .map(|j| lo + (hi - lo) * j as f64 / n as f64)
+        .collect();
+    let mut mem = HysteresisMemory::new();
+    mem.reset(&t, hi as f32);
+    t.forward(&mut mem, lo as f32);
+    let up: Vec<f64> = us
+        .iter()
+        .map(|&u| t.forward(&mut mem, u as f32) as f64)
+        .collect();
+    let down: Vec<f64> = us
+        .iter()
+        .rev()
+        .map(|&u| t.forward(&mut mem, u as f32) as f64)
+        .collect();
+    let c: Vec<f64> = (0..=n).map(|j| 0.5 * (up[j] + down[n - j])).collect();
+    Box::new(move |u: f64| {
+        let p = ((u - lo) / (hi - lo) * n as f64).clamp(0.0, n as f64);
+        let j = (p.floor() as usize).min(n - 1);
+        let f = p - j as f64;
+        c[j] * (1.0 - f) + c[j + 1] * f
+    })
+}
+
+/// The response at `rows` of the table with grid `e` over `range` to `u_v`, started from the
+/// memory `start`, less `rev(u)`, into `c` (left as it is if `e` is not a table).
+fn table_column(
+    e: &[f32],
+    range: (f64, f64),
+    start: &[f32],
+    u_v: &[f64],
+    rows: &[usize],
+    rev: impl Fn(f64) -> f64,
+    c: &mut [f64],
+) {
+    let Ok(t) = HysteresisTable::from_grid(range.0 as f32, range.1 as f32, 0.0, e) else {
+        return;
+    };
+    let mut mem = HysteresisMemory::new();
+    mem.reset_after(&t, start, u_v[0] as f32);
+    let mut next = 0usize;
+    let mut y = mem.output_v();
+    for (j, &row) in rows.iter().enumerate() {
+        while next <= row {
+            y = t.forward(&mut mem, u_v[next] as f32);
+            next += 1;
+        }
+        c[j] = y as f64 - rev(u_v[row]);
+    }
+}
+
 /// Adds the smoothness penalty between adjacent bands to the Gram block of the basis, whose
-/// column `c` sits at `at(c)` in `g` (`None`: not in the solve).
-pub fn add_band_penalty(g: &mut nalgebra::DMatrix<f64>, at: impl Fn(usize) -> Option<usize>) {
+/// column `c` sits at `at(c)` in `g` (`None`: not in the solve), for a split that uses
+/// `bands` bands ([`CentreLine::bands`]; a radius with fewer in the solve is left alone).
+pub fn add_band_penalty(
+    g: &mut nalgebra::DMatrix<f64>,
+    bands: usize,
+    at: impl Fn(usize) -> Option<usize>,
+) {
     for i in 0..HYST_RADII {
         let idx: Vec<usize> = (0..HYST_BANDS).filter_map(|k| at(col(i, k))).collect();
-        if idx.len() != HYST_BANDS {
+        if idx.len() != bands {
             continue;
         }
-        let mean = idx.iter().map(|&p| g[(p, p)]).sum::<f64>() / HYST_BANDS as f64;
+        let mean = idx.iter().map(|&p| g[(p, p)]).sum::<f64>() / bands as f64;
         let lam = HYST_BAND_SMOOTH * mean;
         if lam <= 0.0 || !lam.is_finite() {
             continue;
@@ -349,6 +615,8 @@ pub struct HystFit {
     pub weights: Vec<f64>,
     /// The start memory the columns were computed with (`[hysteresis] start_turns_v`).
     pub start_v: Vec<f64>,
+    /// The centre line the loop columns left out.
+    pub form: CentreLine,
 }
 
 impl HystFit {
@@ -361,7 +629,7 @@ impl HystFit {
         let e = monotone(self.grid_v(static_gain));
         HysteresisSection {
             input_range_v: [range.0, range.1],
-            offset_v: static_gain * range.0,
+            offset_v: static_gain * range.0 - self.bottom_edge_mass_v() - self.rev_at_bottom_v(),
             dc_gain: None,
             loop_width_frac: None,
             everett_v: Some(e),
@@ -369,27 +637,77 @@ impl HystFit {
         }
     }
 
+    /// The weighted mass of the bottom edge relays, sensor volts: their columns are the
+    /// relays less that mass ([`columns`]), so the table's output at the bottom of its range
+    /// is lower by it.
+    fn bottom_edge_mass_v(&self) -> f64 {
+        (0..EDGE_TENTS)
+            .map(|k| self.weights[edge_col(false, k)] * edge_mass(k, self.range))
+            .sum()
+    }
+
+    /// The weighted memoryless parts the loop columns leave out, at the bottom of the range
+    /// (zero for [`CentreLine::Band`]): the table's offset carries them, as a memoryless `f`
+    /// enters the grid as `f(a) - f(b)`, zero at the bottom.
+    fn rev_at_bottom_v(&self) -> f64 {
+        let mut v = 0.0;
+        for i in 0..HYST_RADII {
+            for k in 0..self.form.bands() {
+                let w = self.weights[col(i, k)];
+                if w != 0.0 {
+                    v += w * element(self.range, i, k, self.form).1(self.range.0);
+                }
+            }
+        }
+        v
+    }
+
     /// The Everett grid of `g u` plus the weighted basis, before any repair:
     /// `E(a, b) = g (a - b) + sum_k s_k |[b, a] ^ band_k| + sum_rk m_rk (T_rk - |[b, a] ^ band_k|)`.
     pub fn grid_v(&self, static_gain: f64) -> Vec<f32> {
         let range = self.range;
-        let bands: Vec<(f64, f64)> = (0..HYST_BANDS).map(|k| band_v(range, k)).collect();
-        grid(range, |a, b| {
+        let rev_bands: Vec<(f64, f64)> = (0..HYST_BANDS)
+            .map(|k| band_v(range, k, HYST_BANDS))
+            .collect();
+        let bands: Vec<(f64, f64)> = (0..self.form.bands())
+            .map(|k| band_v(range, k, self.form.bands()))
+            .collect();
+        let mut e: Vec<f64> = grid(range, |a, b| {
             let mut v = static_gain * (a - b);
-            for (k, band) in bands.iter().enumerate() {
+            for (k, band) in rev_bands.iter().enumerate() {
                 v += self.weights[rev_col(k)] * l_k(a, b, *band);
             }
-            for i in 0..HYST_RADII {
-                let r = radius_v(range, i);
-                for (k, band) in bands.iter().enumerate() {
-                    let w = self.weights[col(i, k)];
+            for top in [false, true] {
+                for k in 0..EDGE_TENTS {
+                    let w = self.weights[edge_col(top, k)];
                     if w != 0.0 {
-                        v += w * (t_rk(a, b, r, *band, range) - l_k(a, b, *band));
+                        v += w * t_edge(a, b, top, k, range);
                     }
                 }
             }
             v
         })
+        .into_iter()
+        .map(f64::from)
+        .collect();
+        // The loop elements: each its grid less its memoryless part `rev(a) - rev(b)`.
+        for i in 0..HYST_RADII {
+            for (k, &band) in bands.iter().enumerate() {
+                let w = self.weights[col(i, k)];
+                if w == 0.0 {
+                    continue;
+                }
+                let r = radius_v(range, i);
+                let (_, rev) = element(range, i, k, self.form);
+                let part = grid(range, |a, b| {
+                    w * (t_rk(a, b, r, band, range) - (rev(a) - rev(b)))
+                });
+                for (x, p) in e.iter_mut().zip(part) {
+                    *x += f64::from(p);
+                }
+            }
+        }
+        e.into_iter().map(|x| x as f32).collect()
     }
 }
 
@@ -439,7 +757,12 @@ mod tests {
     /// model) to f32 rounding: the basis and the table are one representation.
     #[test]
     fn the_table_reproduces_the_weighted_columns() {
-        let range = (0.5, 7.5);
+        for form in [CentreLine::Band, CentreLine::Span] {
+            reproduces(form);
+        }
+    }
+
+    fn reproduces(form: CentreLine) {
         let n = 4000;
         let u: Vec<f64> = (0..n)
             .map(|i| {
@@ -448,8 +771,11 @@ mod tests {
                     + 0.4 * (2.0 * std::f64::consts::PI * 17.0 * t).sin()
             })
             .collect();
+        // The records' own range: their extremes on the edge relays' nodes.
+        let (lo, hi) = crate::gap::min_max(&u);
+        let range = hyst_range(lo, hi, form);
         let rows: Vec<usize> = (0..n).step_by(7).collect();
-        let cols = columns(&u, &rows, range, &[]);
+        let cols = columns(&u, &rows, range, &[], form);
         let mut weights = vec![0.0; HYST_COLS];
         // An asymmetric density: wide operators at the top, narrow ones at the bottom.
         weights[col(2, 0)] = 0.3;
@@ -458,11 +784,17 @@ mod tests {
         weights[col(12, 2)] = 0.02;
         weights[rev_col(2)] = -0.1;
         weights[rev_col(3)] = 0.05;
+        if form.edges() {
+            weights[edge_col(false, 1)] = 0.04;
+            weights[edge_col(false, 6)] = 0.02;
+            weights[edge_col(true, 3)] = 0.03;
+        }
         let g = params::PLANT_GAIN;
         let fit = HystFit {
             range,
             weights: weights.clone(),
             start_v: vec![],
+            form,
         };
         let t = fit.section(g).table().expect("a valid table");
         let mut mem = HysteresisMemory::new();
@@ -474,10 +806,23 @@ mod tests {
             worst = worst.max((model - y[row] as f64).abs());
         }
         // f32 table values of up to ~6 V: a few ulps (0.5 uV each) summed over the segments.
-        assert!(worst < 2e-5, "table vs weighted columns: {worst} V");
-        // And the loop is really there: the columns are not all flat.
+        assert!(
+            worst < 2e-5,
+            "{form:?}: table vs weighted columns: {worst} V"
+        );
+        // And the loop is really there: the columns are not all flat (a band-limited play
+        // swings by its band's width when its radius is wider).
+        let band = band_v(range, 3, form.bands());
         let swing = cols[col(9, 3)].iter().fold(0.0f64, |m, v| m.max(v.abs()));
-        assert!(swing > 0.5 * radius_v(range, 9), "column swing {swing}");
+        assert!(swing > 0.5 * (band.1 - band.0), "column swing {swing}");
+        let swing = cols[edge_col(false, 1)]
+            .iter()
+            .fold(0.0f64, |m, v| m.max(v.abs()));
+        if form.edges() {
+            assert!(swing > 0.1, "edge column swing {swing}");
+        } else {
+            assert_eq!(swing, 0.0, "{form:?} has no edge columns");
+        }
     }
 
     /// A valid grid is kept as it is; an invalid one is lifted to the smallest valid grid.
@@ -511,7 +856,7 @@ mod tests {
             let mut rng = rand::rngs::StdRng::seed_from_u64(seed);
             let range = (rng.gen_range(-1.0..2.0), rng.gen_range(6.0..10.0));
             let mut weights = vec![0.0; HYST_COLS];
-            for k in 0..HYST_BANDS {
+            for k in 0..CentreLine::Band.bands() {
                 let raw: Vec<f64> = (0..HYST_RADII)
                     .map(|_| {
                         if rng.gen_bool(0.4) {
@@ -532,6 +877,7 @@ mod tests {
                 range,
                 weights: weights.clone(),
                 start_v: vec![],
+                form: CentreLine::Band,
             };
             let raw = fit.grid_v(g);
             assert_eq!(
@@ -548,6 +894,7 @@ mod tests {
                 range,
                 weights,
                 start_v: vec![],
+                form: CentreLine::Band,
             }
             .grid_v(g);
             assert_ne!(
@@ -564,6 +911,7 @@ mod tests {
             range: (0.0, 10.0),
             weights: vec![0.0; HYST_COLS],
             start_v: vec![],
+            form: CentreLine::Band,
         };
         let t = fit.section(0.79).table().unwrap();
         let mut mem = HysteresisMemory::new();

@@ -41,6 +41,8 @@ pub struct SlowRegressors {
     range: (f64, f64),
     /// The hysteresis start memory the basis was computed with.
     start_v: Vec<f64>,
+    /// The centre line the basis' loop columns leave out.
+    form: everett::CentreLine,
     /// The reversible slope the fitted table keeps (the base model's static gain, sensor
     /// volts per volt): the bound of each band's loop weights ([`solve_slow`]).
     table_gain: f64,
@@ -66,6 +68,11 @@ impl SlowRegressors {
     /// The reversible slope of the fitted table, sensor volts per volt.
     pub fn table_gain(&self) -> f64 {
         self.table_gain
+    }
+
+    /// The centre line the hysteresis basis' loop columns leave out.
+    pub fn form(&self) -> everett::CentreLine {
+        self.form
     }
 }
 
@@ -131,11 +138,19 @@ fn col(x: &SlowRegressors, y0: &[Vec<f64>], r: usize, c: usize, j: usize) -> f64
     }
 }
 
-/// The columns of the slow effects in `set` other than the drift's lags.
-fn fixed_cols(set: &[&str]) -> Vec<usize> {
+/// The columns of the hysteresis basis the split `form` fits.
+fn hyst_cols(form: everett::CentreLine) -> impl Iterator<Item = usize> {
+    (0..HYST_FIT_COLS)
+        .filter(move |&c| form.fits(c))
+        .map(|c| COL_HYST + c)
+}
+
+/// The columns of the slow effects in `set` other than the drift's lags, the hysteresis
+/// basis' those of the split `form`.
+fn fixed_cols(set: &[&str], form: everett::CentreLine) -> Vec<usize> {
     let mut fixed: Vec<usize> = Vec::new();
     if set.contains(&"hysteresis") {
-        fixed.extend(COL_HYST..COL_HYST + HYST_FIT_COLS);
+        fixed.extend(hyst_cols(form));
     }
     if set.contains(&"nonlinear-gain") {
         fixed.extend([COL_GAIN, COL_GAIN + 1]);
@@ -152,12 +167,13 @@ fn fixed_cols(set: &[&str]) -> Vec<usize> {
 /// The regressors of `data` at the rows `rows` ([`solve_rows`]), the hysteresis basis
 /// starting every record from the memory `start_v` (turning points,
 /// [`everett::start_candidates`]), for a table whose reversible slope is `table_gain` (the
-/// base model's static gain).
+/// base model's static gain), its loop columns leaving out the centre line `form`.
 pub(super) fn slow_regressors(
     data: &[Data],
     rows: SolveRows,
     start_v: &[f64],
     table_gain: f64,
+    form: everett::CentreLine,
 ) -> SlowRegressors {
     let SolveRows { rows, u_fit } = rows;
     let (lo, hi) = data
@@ -166,9 +182,9 @@ pub(super) fn slow_regressors(
             let (l, h) = super::data::min_max(&d.u_v);
             (a.min(l), b.max(h))
         });
-    let range = everett::hyst_range(lo, hi);
+    let range = everett::hyst_range(lo, hi, form);
     let hyst = crate::util::par_map(&u_fit.iter().zip(&rows).collect::<Vec<_>>(), |(u, r)| {
-        everett::columns(u, r, range, start_v)
+        everett::columns(u, r, range, start_v, form)
     });
     let base = SlowRegressors {
         cols: Vec::new(),
@@ -178,6 +194,7 @@ pub(super) fn slow_regressors(
         hyst: std::sync::Arc::new(hyst),
         range,
         start_v: start_v.to_vec(),
+        form,
         table_gain,
         gram: std::sync::OnceLock::new(),
     };
@@ -191,7 +208,16 @@ impl SlowRegressors {
             rows: self.rows.clone(),
             u_fit: self.u_fit.as_ref().clone(),
         };
-        slow_regressors(data, rows, start_v, self.table_gain)
+        slow_regressors(data, rows, start_v, self.table_gain, self.form)
+    }
+
+    /// The same regressors with the loop columns leaving out the centre line `form`.
+    pub(super) fn with_form(&self, data: &[Data], form: everett::CentreLine) -> SlowRegressors {
+        let rows = SolveRows {
+            rows: self.rows.clone(),
+            u_fit: self.u_fit.as_ref().clone(),
+        };
+        slow_regressors(data, rows, &self.start_v, self.table_gain, form)
     }
 }
 
@@ -434,6 +460,7 @@ fn slow_regressors_shaped(data: &[Data], shape: &Shape, base: &SlowRegressors) -
         hyst: base.hyst.clone(),
         range: base.range,
         start_v: base.start_v.clone(),
+        form: base.form,
         table_gain: base.table_gain,
         gram: std::sync::OnceLock::new(),
     }
@@ -531,7 +558,7 @@ fn fit_drift_poly(
     let xs = slow_regressors_shaped(data, &plain, x);
     let mut fixed: Vec<usize> = Vec::new();
     if p.hysteresis.is_some() {
-        fixed.extend(COL_HYST..COL_HYST + HYST_FIT_COLS);
+        fixed.extend(hyst_cols(x.form));
     }
     if p.gain.is_some() {
         fixed.extend([COL_GAIN, COL_GAIN + 1]);
@@ -649,7 +676,7 @@ fn fit_slow_linear(
         let (beta, red) = solve_slow(a, &v, idx, 0, &nonneg, warm, x.table_gain)?;
         Some((beta.iter().copied().collect(), red))
     };
-    let fixed = fixed_cols(set);
+    let fixed = fixed_cols(set, x.form);
     let unpack = |idx: &[usize], beta: &[f64], taus: Option<[usize; 3]>| -> SlowParams {
         let get = |k: usize| {
             idx.iter()
@@ -671,6 +698,7 @@ fn fit_slow_linear(
             hysteresis: set.contains(&"hysteresis").then(|| HystFit {
                 start_v: x.start_v.clone(),
                 range: x.range,
+                form: x.form,
                 weights: (0..HYST_COLS).map(|i| get(COL_HYST + i)).collect(),
             }),
             gain: set
@@ -847,7 +875,7 @@ fn descale(mut p: SlowParams) -> SlowParams {
 /// could turn clockwise or the output run backwards after a reversal, which no stage does;
 /// unconstrained, a lone hysteresis fit soaks up drift and gain errors with weights of +-2.
 fn is_nonneg_col(k: usize) -> bool {
-    k < N_TAU || (COL_HYST..COL_HYST + everett::HYST_LOOP_COLS).contains(&k)
+    k < N_TAU || (COL_HYST..COL_HYST + everett::HYST_NONNEG_COLS).contains(&k)
 }
 
 /// Weight of the table-validity penalty of `solve_slow`, in units of the data's own
@@ -945,9 +973,17 @@ fn solve_slow(
 }
 
 /// The hysteresis basis' smoothness penalty ([`everett::add_band_penalty`]) on a Gram matrix
-/// whose rows from `at` on are the regressor columns `cols`.
+/// whose rows from `at` on are the regressor columns `cols`, for the split whose loop columns
+/// `cols` holds (its bands: the most any radius has in `cols`, as [`fixed_cols`] passes a
+/// split's whole radii or none).
 fn band_penalty(g: &mut DMatrix<f64>, cols: &[usize], at: usize) {
-    everett::add_band_penalty(g, |c| {
+    let loop_band = |c: usize| {
+        (COL_HYST..COL_HYST + everett::HYST_LOOP_COLS)
+            .contains(&c)
+            .then(|| (c - COL_HYST) % everett::HYST_BANDS)
+    };
+    let bands = cols.iter().filter_map(|&c| loop_band(c)).max().map_or(0, |k| k + 1);
+    everett::add_band_penalty(g, bands, |c| {
         cols.iter().position(|&k| k == COL_HYST + c).map(|p| at + p)
     });
 }
