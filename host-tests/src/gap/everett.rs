@@ -154,7 +154,8 @@ pub const HYST_BAND_SMOOTH: f64 = 0.1;
 ///   basis alone on that table's static output over the identification protocol's slow record:
 ///   `Band` 14.5 mV, `Span` 0.3 mV; on two PI truths over a 1 Hz sine, `Band` 0.5 and 2.1 mV,
 ///   `Span` 346 and 273 mV. Neither split serves both families.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "lowercase")]
 pub enum CentreLine {
     /// Band relays less `clamp(u, band)`.
     Band,

@@ -12,6 +12,7 @@
 
 use super::catalogue;
 use super::data::Data;
+use super::everett::CentreLine;
 use super::select::Diagnosis;
 use crate::io::model_file::ModelFile;
 use anyhow::Context;
@@ -61,6 +62,28 @@ impl Diagnosis {
                 .map(|(k, v)| format!("{k}={}", fmt_num(*v)))
                 .collect();
             s.push_str(&format!("final {e}: {}\n", p.join(" ")));
+        }
+        if self.named.iter().any(|e| e == "hysteresis") {
+            let c = &self.centre_line;
+            let (kept, other) = match c.chosen {
+                CentreLine::Band => (c.band_noise_var, c.span_noise_var),
+                CentreLine::Span => (c.span_noise_var, c.band_noise_var),
+            };
+            s.push_str(&format!(
+                "hysteresis basis: the {} split ({}): hysteresis and drift alone left {} noise \
+                 variances over the records, the other split {}\n",
+                match c.chosen {
+                    CentreLine::Band => "band",
+                    CentreLine::Span => "span",
+                },
+                match c.chosen {
+                    CentreLine::Band => "each centre band's relays less clamp(u, band), a PI stage's loop",
+                    CentreLine::Span =>
+                        "each element less its centre line over the records' span, with edge relays: a loop whose centre line is straight",
+                },
+                fmt_num(kept),
+                fmt_num(other)
+            ));
         }
         s.push_str(&format!(
             "named: [{}]; noise floor {:.2} mV; final residual {:.2} mV ({:.2}x the floor)\n",

@@ -79,6 +79,21 @@ pub struct Diagnosis {
     /// The residual no catalogued effect explained, when some record stays above
     /// [`super::unexplained::UNEXPLAINED_FLOOR_RATIO`] times its floor.
     pub unexplained: Option<Unexplained>,
+    /// The split of the hysteresis basis the records chose, and why.
+    pub centre_line: CentreChoice,
+}
+
+/// The split of the hysteresis basis ([`CentreLine`]) the records chose: hysteresis and drift
+/// fitted from the base model with each, and what each left.
+#[derive(Clone, Copy, Debug, serde::Serialize)]
+pub struct CentreChoice {
+    /// The split kept for the whole diagnosis.
+    pub chosen: CentreLine,
+    /// With the `Band` split: the sum over records of the mean squared residual, in noise
+    /// variances (`null` in JSON when the fit failed).
+    pub band_noise_var: f64,
+    /// The same with the `Span` split.
+    pub span_noise_var: f64,
 }
 
 impl Diagnosis {
@@ -99,6 +114,7 @@ impl Diagnosis {
             "final_rms_v": self.final_rms_v,
             "unexplained": self.unexplained,
             "cannot_tell": self.cannot_tell,
+            "hysteresis_split": self.centre_line,
         })
     }
 }
@@ -248,7 +264,7 @@ pub fn diagnose(base: &ModelFile, data: &[Data], opts: &Options) -> anyhow::Resu
     let base_sigs = signatures::compute(data, &sims, &noise);
     let rows = solve_rows(data, base, &noise)?;
     let slow_x = slow_regressors(data, rows, &[], base.plant.static_gain, CentreLine::Band);
-    let mut slow_x = choose_centre_line(base, data, slow_x, &var, u_range);
+    let (mut slow_x, centre_line) = choose_centre_line(base, data, slow_x, &var, u_range);
     let mut steps: Vec<Step> = Vec::new();
     let mut named: Vec<String> = Vec::new();
     let mut tried = Vec::new();
@@ -345,15 +361,11 @@ pub fn diagnose(base: &ModelFile, data: &[Data], opts: &Options) -> anyhow::Resu
         {
             // Records that hold several levels tell the shapes apart where the one a step
             // would add puts those levels clearly nearer the records than its rival does.
-            let told_by_levels = |sims: &[Vec<f64>]| match (e_levels, held_level_error(data, sims, &var)) {
-                (Some(a), Some(b)) => {
-                    if std::env::var_os("GAP_DEBUG").is_some() {
-                        eprintln!("levels: {e} {a:.3e} vs rival {b:.3e}");
-                    }
-                    a * STATIC_TELL_RATIO <= b
-                }
-                _ => false,
-            };
+            let told_by_levels =
+                |sims: &[Vec<f64>]| match (e_levels, held_level_error(data, sims, &var)) {
+                    (Some(a), Some(b)) => a * STATIC_TELL_RATIO <= b,
+                    _ => false,
+                };
             let rivals: Vec<(String, f64, f64)> = scored
                 .iter()
                 .filter(|x| {
@@ -668,6 +680,7 @@ pub fn diagnose(base: &ModelFile, data: &[Data], opts: &Options) -> anyhow::Resu
         signatures: base_sigs,
         unexplained,
         cannot_tell,
+        centre_line,
     })
 }
 
@@ -750,7 +763,7 @@ fn choose_centre_line(
     band: SlowRegressors,
     var: &[f64],
     u_range: (f64, f64),
-) -> SlowRegressors {
+) -> (SlowRegressors, CentreChoice) {
     let span = band.with_form(data, CentreLine::Span);
     let score = |x: &SlowRegressors| -> f64 {
         refit_slow(base, &["hysteresis", "drift"], data, x, u_range)
@@ -764,10 +777,16 @@ fn choose_centre_line(
             .unwrap_or(f64::INFINITY)
     };
     let (sb, ss) = (score(&band), score(&span));
-    if std::env::var_os("GAP_DEBUG").is_some() {
-        eprintln!("centre line: band {sb:.3e}, span {ss:.3e} noise variances");
+    let choice = |chosen| CentreChoice {
+        chosen,
+        band_noise_var: sb,
+        span_noise_var: ss,
+    };
+    if ss < sb {
+        (span, choice(CentreLine::Span))
+    } else {
+        (band, choice(CentreLine::Band))
     }
-    if ss < sb { span } else { band }
 }
 
 /// `m` with its slow effects, and those of `extra` it lacks, fitted afresh together to the

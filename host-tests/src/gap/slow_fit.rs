@@ -982,7 +982,11 @@ fn band_penalty(g: &mut DMatrix<f64>, cols: &[usize], at: usize) {
             .contains(&c)
             .then(|| (c - COL_HYST) % everett::HYST_BANDS)
     };
-    let bands = cols.iter().filter_map(|&c| loop_band(c)).max().map_or(0, |k| k + 1);
+    let bands = cols
+        .iter()
+        .filter_map(|&c| loop_band(c))
+        .max()
+        .map_or(0, |k| k + 1);
     everett::add_band_penalty(g, bands, |c| {
         cols.iter().position(|&k| k == COL_HYST + c).map(|p| at + p)
     });
