@@ -661,6 +661,10 @@ pub fn diagnose(base: &ModelFile, data: &[Data], opts: &Options) -> anyhow::Resu
         }
     }
     let mut cannot_tell = cannot_tell(&model, base, &named, data, &slow_x, u_range, &cur_mse);
+    // A pair left unnamed at one step whose shape a later step named (told apart then, by the
+    // held levels or because the rival no longer explained alike) is no longer a pair the
+    // records cannot tell.
+    ambiguous.retain(|c| !named.contains(&c.named) && !named.contains(&c.alternative));
     cannot_tell.extend(ambiguous);
     let unexplained = locate(data, &sims, &noise);
     if let Some(b) = &bar {
@@ -708,7 +712,7 @@ fn prune_bar(unit: &[String]) -> f64 {
                 .sum::<f64>()
 }
 
-/// Held levels a record must show for [`held_level_error`] to tell a scale, an offset and a
+/// Held levels a record must show for `held_level_error` to tell a scale, an offset and a
 /// curvature apart: three parameters, three levels (our assumption: levels closer than
 /// [`HELD_LEVEL_MIN_SEP_V`] count as one).
 pub const HELD_LEVELS_MIN: usize = 3;
@@ -947,4 +951,48 @@ fn candidates(
         })
     });
     results.into_iter().collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::io::csv::Record;
+
+    /// A 1 kHz record that holds `levels` volts for a second each, its output `0.8 u`.
+    fn held(levels: &[f64]) -> Data {
+        let n = 1000 * levels.len();
+        let t: Vec<f64> = (0..n).map(|i| i as f64 * 1e-3).collect();
+        let u: Vec<f64> = (0..n).map(|i| levels[i / 1000]).collect();
+        let y: Vec<f64> = u.iter().map(|u| 0.8 * u).collect();
+        Data::from_record("held.csv", Record::new(t, u, Some(y), None).unwrap()).unwrap()
+    }
+
+    /// The held levels' error is the squared level misfit in noise variances, summed over the
+    /// holds; a scale error and an offset of the same size at the middle level differ at the
+    /// others; fewer than three levels tell nothing.
+    #[test]
+    fn held_levels_measure_the_level_misfit() {
+        let d = held(&[2.0, 5.0, 8.0]);
+        let var = [1e-6];
+        let exact =
+            held_level_error(std::slice::from_ref(&d), std::slice::from_ref(&d.y_v), &var).unwrap();
+        assert!(exact < 1e-18, "{exact}");
+        // 1 mV off at every level: 1 noise variance a hold (the first hold starts at sample 1).
+        let off: Vec<f64> = d.y_v.iter().map(|y| y + 1e-3).collect();
+        let e_off = held_level_error(std::slice::from_ref(&d), &[off], &var).unwrap();
+        assert!((e_off - 3.0).abs() < 1e-6, "{e_off}");
+        // A scale error of 1 mV at 5 V: 0.4, 1 and 1.6 mV at the three levels.
+        let scaled: Vec<f64> = d.y_v.iter().map(|y| y * (1.0 + 1e-3 / 4.0)).collect();
+        let e_sc = held_level_error(std::slice::from_ref(&d), &[scaled], &var).unwrap();
+        assert!((e_sc - (0.16 + 1.0 + 2.56)).abs() < 1e-6, "{e_sc}");
+        let two = held(&[2.0, 8.0, 2.0]);
+        assert!(
+            held_level_error(
+                std::slice::from_ref(&two),
+                std::slice::from_ref(&two.y_v),
+                &var
+            )
+            .is_none()
+        );
+    }
 }
