@@ -51,8 +51,10 @@
 //! # Resolution and regulariser
 //! Radii: [`HYST_RADII`] at odd multiples of half the table's grid interval ([`radius_v`]:
 //! the basis follows the table's own resolution instead of a fixed list of radii);
-//! bands: [`HYST_BANDS`] over the records' input span, edges on
-//! grid nodes. The table spans the records' inputs ([`hyst_range`]). The weights of one
+//! bands over the records' input span, edges on grid nodes, as many as the split uses
+//! ([`CentreLine::bands`]: four for [`CentreLine::Band`], eleven for [`CentreLine::Span`],
+//! which also has the edge relays [`edge_col`]). The table spans the records' inputs and a
+//! margin that depends on the split ([`hyst_range`]). The weights of one
 //! radius in adjacent bands are tied by a smoothness penalty (Tikhonov on their differences,
 //! [`HYST_BAND_SMOOTH`] times the mean Gram diagonal of that radius): a record that excites
 //! one band only, or cannot tell the bands apart, gets equal weights (a play operator); one
