@@ -92,8 +92,12 @@ pub const HYST_RADII: usize = INTERVALS / 2;
 pub const HYST_LOOP_COLS: usize = HYST_RADII * HYST_BANDS;
 
 /// Tents along each edge of the records' span that spread the edge relays' free thresholds
-/// ([`edge_col`]; our assumption: one every four grid intervals, the bands' resolution).
-pub const EDGE_TENTS: usize = (INTERVALS - 2 * EDGE_NODE) / 4 + 1;
+/// ([`edge_col`]; our assumption: one every [`EDGE_TENT_INTERVALS`] grid intervals, the
+/// bands' resolution).
+pub const EDGE_TENTS: usize = (INTERVALS - 2 * EDGE_NODE) / EDGE_TENT_INTERVALS + 1;
+
+/// Grid intervals between the edge tents' centres, and each tent's half-width.
+pub const EDGE_TENT_INTERVALS: usize = 4;
 
 /// Edge-relay columns: [`EDGE_TENTS`] at the bottom of the span, then as many at its top.
 pub const HYST_EDGE_COLS: usize = 2 * EDGE_TENTS;
@@ -184,6 +188,21 @@ impl CentreLine {
         matches!(self, CentreLine::Span)
     }
 
+    /// The split's name in tables and JSON, and what its loop columns leave out.
+    pub const fn describe(self) -> (&'static str, &'static str) {
+        match self {
+            CentreLine::Band => (
+                "band",
+                "each centre band's relays less clamp(u, band), a PI stage's loop",
+            ),
+            CentreLine::Span => (
+                "span",
+                "each element less its centre line over the records' span, with edge relays: \
+                 a loop whose centre line is straight",
+            ),
+        }
+    }
+
     /// Is basis column `c` one this split fits: the loop columns of the bands it uses
     /// ([`Self::bands`]), the edge columns if it has them ([`Self::edges`]), and the
     /// reversible ones if [`HYST_FIT_REVERSIBLE`].
@@ -235,15 +254,16 @@ pub const HYST_RANGE_MARGIN_V: f64 = 0.5;
 /// `EDGE_NODE` and `INTERVALS - EDGE_NODE`), for the [`CentreLine::Band`] split by
 /// [`HYST_RANGE_MARGIN_V`].
 pub fn hyst_range(lo: f64, hi: f64, form: CentreLine) -> (f64, f64) {
-    if !form.edges() {
-        let lo = (lo - HYST_RANGE_MARGIN_V)
-            .clamp(params::AMP_INPUT_MIN_V, params::AMP_INPUT_MAX_V - 1.0);
-        let hi = (hi + HYST_RANGE_MARGIN_V).clamp(lo + 1.0, params::AMP_INPUT_MAX_V);
-        return (lo, hi);
-    }
-    let hi = hi.max(lo + 0.9);
-    let d = (hi - lo) / (INTERVALS - 2 * EDGE_NODE) as f64;
-    let m = EDGE_NODE as f64 * d;
+    let (hi, m) = if form.edges() {
+        // A span of at least 0.9 V, so that with its margins the table is about 1 V wide.
+        let hi = hi.max(lo + 0.9);
+        (
+            hi,
+            EDGE_NODE as f64 * (hi - lo) / (INTERVALS - 2 * EDGE_NODE) as f64,
+        )
+    } else {
+        (hi, HYST_RANGE_MARGIN_V)
+    };
     let lo = (lo - m).clamp(params::AMP_INPUT_MIN_V, params::AMP_INPUT_MAX_V - 1.0);
     let hi = (hi + m).clamp(lo + 1.0, params::AMP_INPUT_MAX_V);
     (lo, hi)
@@ -301,6 +321,12 @@ fn band_v(range: (f64, f64), k: usize, bands: usize) -> (f64, f64) {
     (node_v(range, k * per), node_v(range, (k + 1) * per))
 }
 
+/// How far into `band` the input `u` (held within the table's `range`) lies, volts: a band's
+/// reversible part.
+fn in_band(u: f64, band: (f64, f64), range: (f64, f64)) -> f64 {
+    u.clamp(range.0, range.1).clamp(band.0, band.1) - band.0
+}
+
 /// Column index of (radius `i`, band `k`).
 pub const fn col(i: usize, k: usize) -> usize {
     i * HYST_BANDS + k
@@ -333,8 +359,8 @@ fn l_k(a: f64, b: f64, band: (f64, f64)) -> f64 {
 fn edge_tent_integral(x0: f64, x1: f64, k: usize, range: (f64, f64)) -> f64 {
     let lo = node_v(range, EDGE_NODE);
     let hi = node_v(range, INTERVALS - EDGE_NODE);
-    let h = 4.0 * (range.1 - range.0) / INTERVALS as f64;
-    let m = node_v(range, EDGE_NODE + 4 * k);
+    let h = EDGE_TENT_INTERVALS as f64 * (range.1 - range.0) / INTERVALS as f64;
+    let m = node_v(range, EDGE_NODE + EDGE_TENT_INTERVALS * k);
     let x0 = x0.max(lo).max(m - h);
     let x1 = x1.min(hi).min(m + h);
     if x1 <= x0 {
@@ -488,7 +514,7 @@ pub fn columns(
         let band = band_v(range, k, HYST_BANDS);
         out[rev_col(k)] = rows
             .iter()
-            .map(|&row| u_v[row].clamp(range.0, range.1).clamp(band.0, band.1) - band.0)
+            .map(|&row| in_band(u_v[row], band, range))
             .collect();
     }
     out
@@ -512,9 +538,7 @@ fn element(
     let band = band_v(range, k, form.bands());
     let e = grid(range, |a, b| t_rk(a, b, r, band, range));
     let rev: Box<dyn Fn(f64) -> f64> = match form {
-        CentreLine::Band => {
-            Box::new(move |u: f64| u.clamp(range.0, range.1).clamp(band.0, band.1) - band.0)
-        }
+        CentreLine::Band => Box::new(move |u: f64| in_band(u, band, range)),
         CentreLine::Span => centre_line(&e, range),
     };
     (e, rev)

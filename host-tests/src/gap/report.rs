@@ -69,18 +69,10 @@ impl Diagnosis {
                 CentreLine::Band => (c.band_noise_var, c.span_noise_var),
                 CentreLine::Span => (c.span_noise_var, c.band_noise_var),
             };
+            let (name, what) = c.chosen.describe();
             s.push_str(&format!(
-                "hysteresis basis: the {} split ({}): hysteresis and drift alone left {} noise \
-                 variances over the records, the other split {}\n",
-                match c.chosen {
-                    CentreLine::Band => "band",
-                    CentreLine::Span => "span",
-                },
-                match c.chosen {
-                    CentreLine::Band => "each centre band's relays less clamp(u, band), a PI stage's loop",
-                    CentreLine::Span =>
-                        "each element less its centre line over the records' span, with edge relays: a loop whose centre line is straight",
-                },
+                "hysteresis basis: the {name} split ({what}): hysteresis and drift alone left {} \
+                 noise variances over the records, the other split {}\n",
                 fmt_num(kept),
                 fmt_num(other)
             ));

@@ -353,12 +353,18 @@ pub fn diagnose(base: &ModelFile, data: &[Data], opts: &Options) -> anyhow::Resu
             .filter(|x| x.3)
             .min_by(|a, b| a.1.total_cmp(&b.1))
             .map(|x| {
-                let levels = held_level_error(data, &x.0.sims, &var);
-                (x.0.effect.clone(), x.0.refit, x.2, rms_of(&x.0.mse), levels)
+                (
+                    x.0.effect.clone(),
+                    x.0.refit,
+                    x.2,
+                    rms_of(&x.0.mse),
+                    &x.0.sims,
+                )
             });
-        if let Some((e, false, ex, e_rms, e_levels)) = best_effect
+        if let Some((e, false, ex, e_rms, e_sims)) = best_effect
             && STATIC_SHAPES.contains(&e.as_str())
         {
+            let e_levels = held_level_error(data, e_sims, &var);
             // Records that hold several levels tell the shapes apart where the one a step
             // would add puts those levels clearly nearer the records than its rival does.
             let told_by_levels =

@@ -69,11 +69,6 @@ impl SlowRegressors {
     pub fn table_gain(&self) -> f64 {
         self.table_gain
     }
-
-    /// The centre line the hysteresis basis' loop columns leave out.
-    pub fn form(&self) -> everett::CentreLine {
-        self.form
-    }
 }
 
 /// Rows of one record the slow solve uses at most (our assumption: the slow effects change
@@ -204,20 +199,21 @@ pub(super) fn slow_regressors(
 impl SlowRegressors {
     /// The same regressors with the hysteresis basis started from the memory `start_v`.
     pub(super) fn with_start(&self, data: &[Data], start_v: &[f64]) -> SlowRegressors {
-        let rows = SolveRows {
-            rows: self.rows.clone(),
-            u_fit: self.u_fit.as_ref().clone(),
-        };
-        slow_regressors(data, rows, start_v, self.table_gain, self.form)
+        self.rebuilt(data, start_v, self.form)
     }
 
     /// The same regressors with the loop columns leaving out the centre line `form`.
     pub(super) fn with_form(&self, data: &[Data], form: everett::CentreLine) -> SlowRegressors {
+        self.rebuilt(data, &self.start_v, form)
+    }
+
+    /// The regressors on the same rows with the hysteresis basis computed afresh.
+    fn rebuilt(&self, data: &[Data], start_v: &[f64], form: everett::CentreLine) -> Self {
         let rows = SolveRows {
             rows: self.rows.clone(),
             u_fit: self.u_fit.as_ref().clone(),
         };
-        slow_regressors(data, rows, &self.start_v, self.table_gain, form)
+        slow_regressors(data, rows, start_v, self.table_gain, form)
     }
 }
 
