@@ -269,6 +269,7 @@ pub fn diagnose(base: &ModelFile, data: &[Data], opts: &Options) -> anyhow::Resu
     let mut named: Vec<String> = Vec::new();
     let mut tried = Vec::new();
     let mut ambiguous: Vec<CannotTell> = Vec::new();
+    let any_hold = data.iter().any(Data::has_hold);
 
     for _ in 0..MAX_STEPS {
         if let Some(b) = &bar {
@@ -344,6 +345,58 @@ pub fn diagnose(base: &ModelFile, data: &[Data], opts: &Options) -> anyhow::Resu
                 .map(|(c, s, e, ok)| (c.effect.clone(), *s, *e, *ok))
                 .collect(),
         );
+        // Without a hold in any record, a drift's only evidence is a slow residual under the
+        // moving input, and its lags longer than the reversals' spacing act as a constant and
+        // a scale: where a static shape (which needs no hold to show) explains alike, the
+        // drift gives way to it and the pair is reported (issue #12 item 1: say so, do not
+        // guess).
+        if !any_hold {
+            let best = scored
+                .iter()
+                .filter(|x| x.3)
+                .min_by(|a, b| a.1.total_cmp(&b.1));
+            if let Some((d, _, d_ex, _)) = best
+                && d.effect == "drift"
+                && !d.refit
+            {
+                let d_rms = rms_of(&d.mse);
+                let rival = scored
+                    .iter()
+                    .filter(|x| {
+                        x.3 && !x.0.refit
+                            && STATIC_SHAPES.contains(&x.0.effect.as_str())
+                            && x.2 * STATIC_TELL_RATIO >= *d_ex
+                            && (1.0 - x.2).max(1e-12) <= STATIC_TELL_RATIO * (1.0 - d_ex).max(1e-12)
+                    })
+                    .min_by(|a, b| a.1.total_cmp(&b.1))
+                    .map(|x| (x.0.effect.clone(), x.2, rms_of(&x.0.mse)));
+                if let Some((r, r_ex, r_rms)) = rival {
+                    if !ambiguous
+                        .iter()
+                        .any(|c: &CannotTell| c.named == r && c.alternative == "drift")
+                    {
+                        ambiguous.push(CannotTell {
+                            named: r.clone(),
+                            alternative: "drift".into(),
+                            neither_named: false,
+                            rms_v: r_rms,
+                            alternative_rms_v: d_rms,
+                            why: format!(
+                                "no record holds its input for {HOLD_MIN_S} s: drift would explain \
+                                 {:.0} % of the residual power above the noise floor and {r} \
+                                 {:.0} %, and a lag longer than the reversals' spacing acts as a \
+                                 constant and a scale; the drift gives way to {r}, which needs no \
+                                 hold to show; record holds (the recommended protocol) to tell \
+                                 them apart",
+                                100.0 * d_ex,
+                                100.0 * r_ex
+                            ),
+                        });
+                    }
+                    scored.retain(|x| x.0.refit || x.0.effect != "drift");
+                }
+            }
+        }
         // The static effects the records cannot tell apart: when the best admissible
         // candidate is one of them and another both explains and leaves nearly as much
         // (within STATIC_TELL_RATIO either way), neither is named (the records leave the
@@ -619,7 +672,13 @@ pub fn diagnose(base: &ModelFile, data: &[Data], opts: &Options) -> anyhow::Resu
             .collect();
         let mut swaps: Vec<(String, String)> = Vec::new();
         for e in &named_slow {
-            for f in SLOW.iter().filter(|f| !named.iter().any(|n| n == *f)) {
+            // Without holds the drift gave way to the static shapes at each step: no swap
+            // brings it back.
+            for f in SLOW
+                .iter()
+                .filter(|f| !named.iter().any(|n| n == *f))
+                .filter(|f| any_hold || **f != "drift")
+            {
                 swaps.push((e.clone(), f.to_string()));
             }
         }
@@ -685,7 +744,14 @@ pub fn diagnose(base: &ModelFile, data: &[Data], opts: &Options) -> anyhow::Resu
     // A pair left unnamed at one step whose shape a later step named (told apart then, by the
     // held levels or because the rival no longer explained alike) is no longer a pair the
     // records cannot tell.
-    ambiguous.retain(|c| !named.contains(&c.named) && !named.contains(&c.alternative));
+    // A drift that gave way stays reported unless a later step named it.
+    ambiguous.retain(|c| {
+        if c.neither_named {
+            !named.contains(&c.named) && !named.contains(&c.alternative)
+        } else {
+            !named.contains(&c.alternative)
+        }
+    });
     cannot_tell.extend(ambiguous);
     let unexplained = locate(data, &sims, &noise);
     if let Some(b) = &bar {
