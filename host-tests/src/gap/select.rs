@@ -870,7 +870,9 @@ fn choose_centre_line(
             .filter(|v| v.is_finite())
             .unwrap_or(f64::INFINITY)
     };
-    let (sb, ss) = (score(&band), score(&span));
+    // (the two fits side by side: each is one long drift search)
+    let both = crate::util::par_map(&[&band, &span], |x| score(x));
+    let (sb, ss) = (both[0], both[1]);
     let choice = |chosen| CentreChoice {
         chosen,
         band_noise_var: sb,

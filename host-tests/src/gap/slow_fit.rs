@@ -448,7 +448,7 @@ fn slow_regressors_shaped(data: &[Data], shape: &Shape, base: &SlowRegressors) -
         cols.push(c);
         drives.push(drive);
     }
-    SlowRegressors {
+    let x = SlowRegressors {
         cols,
         rows: base.rows.clone(),
         drive: drives,
@@ -459,28 +459,87 @@ fn slow_regressors_shaped(data: &[Data], shape: &Shape, base: &SlowRegressors) -
         form: base.form,
         table_gain: base.table_gain,
         gram: std::sync::OnceLock::new(),
+    };
+    // Without K'(u) only the lags changed.
+    if shape.kprime.is_none()
+        && let Some(g) = base.gram.get()
+    {
+        let _ = x.gram.set(gram_new_lags(&x, g));
     }
+    x
 }
 
 /// The weighted Gram matrix of the input-only columns and the offset's ([`SlowRegressors`]'
 /// `gram`).
 #[allow(clippy::needless_range_loop)] // a triangle of the matrix
 fn input_gram(x: &SlowRegressors) -> DMatrix<f64> {
+    let active = active_cols(x.form);
     let mut g = DMatrix::<f64>::zeros(N_COLS, N_COLS);
     for (cols, rows) in x.cols.iter().zip(&x.rows) {
         let w = 1.0 / rows.len().max(1) as f64;
-        // The record's design matrix (its columns, then the offset's ones) times itself: a
-        // blocked product (nalgebra's gemm), several times the speed of a row-by-row sum over
-        // the two hundred columns of the hysteresis basis.
-        let n = rows.len();
-        let mut m = DMatrix::<f64>::zeros(n, COL_OFFSET + 1);
-        for (k, c) in cols.iter().enumerate() {
-            m.column_mut(k).copy_from_slice(c);
-        }
-        m.column_mut(COL_OFFSET).fill(1.0);
+        // The record's design matrix (its columns the split fits, then the offset's ones)
+        // times itself: a blocked product (nalgebra's gemm), several times the speed of a
+        // row-by-row sum over the two hundred columns of the hysteresis basis; the other
+        // split's columns (zero, never solved for) are left out.
+        let m = design(cols, rows.len(), &active);
         let gl = m.transpose() * &m;
-        let mut v = g.view_mut((0, 0), (COL_OFFSET + 1, COL_OFFSET + 1));
-        v += gl * w;
+        for (i, &ci) in active.iter().enumerate() {
+            for (j, &cj) in active.iter().enumerate() {
+                g[(ci, cj)] += w * gl[(i, j)];
+            }
+        }
+    }
+    g
+}
+
+/// The columns of the Gram matrix a split's solves use: the lags, the split's hysteresis
+/// columns, the gain terms and the offset (last).
+fn active_cols(form: everett::CentreLine) -> Vec<usize> {
+    (0..N_TAU)
+        .chain(hyst_cols(form))
+        .chain([COL_GAIN, COL_GAIN + 1, COL_OFFSET])
+        .collect()
+}
+
+/// A record's design matrix over the `active` columns (the offset's ones last).
+fn design(cols: &[Vec<f64>], n: usize, active: &[usize]) -> DMatrix<f64> {
+    let mut m = DMatrix::<f64>::zeros(n, active.len());
+    for (k, &c) in active.iter().enumerate() {
+        if c == COL_OFFSET {
+            m.column_mut(k).fill(1.0);
+        } else {
+            m.column_mut(k).copy_from_slice(&cols[c]);
+        }
+    }
+    m
+}
+
+/// [`input_gram`] of regressors whose columns differ from `base`'s (Gram matrix `g_base`)
+/// only in the drift's lags: the lags' rows and columns computed again, the rest kept (a
+/// structural round with K(u) but no K'(u) on the hysteresis columns).
+fn gram_new_lags(x: &SlowRegressors, g_base: &DMatrix<f64>) -> DMatrix<f64> {
+    let active = active_cols(x.form);
+    let lags: Vec<usize> = (0..N_TAU).collect();
+    let mut g = g_base.clone();
+    for c in &lags {
+        for &a in &active {
+            g[(*c, a)] = 0.0;
+            g[(a, *c)] = 0.0;
+        }
+    }
+    for (cols, rows) in x.cols.iter().zip(&x.rows) {
+        let w = 1.0 / rows.len().max(1) as f64;
+        let l = design(cols, rows.len(), &lags);
+        let m = design(cols, rows.len(), &active);
+        let gl = l.transpose() * &m;
+        for (i, &ci) in lags.iter().enumerate() {
+            for (j, &cj) in active.iter().enumerate() {
+                g[(ci, cj)] += w * gl[(i, j)];
+                if !lags.contains(&cj) {
+                    g[(cj, ci)] += w * gl[(i, j)];
+                }
+            }
+        }
     }
     g
 }
