@@ -76,6 +76,13 @@ pub const DRIFT_TAU_MAX_RECORDS: f64 = 2.0;
 /// gap between two bin means of 20 samples or more stays near one noise sigma; three is a
 /// loop, not noise; a sensor-gain error with 1 mV of noise shows 0.5 mV, a real loop hundreds).
 pub const HYST_LOOP_MIN_NOISE: f64 = 3.0;
+/// The residual's largest tail during a hold ([`super::signatures::Signatures::tail_v`]) that
+/// `drift` needs where the records hold their input, in noise floors (our assumption: a tail
+/// is the difference of two means of a tenth of a hold of 0.2 s or more, so noise alone moves
+/// it by well under one floor; a creep shows tens of floors). Measured on the families suite:
+/// the drifts named falsely beside tails of 0.0-0.6 mV (1024, 1033, 1057, 1 mV floors), the
+/// true ones beside 35-146 mV.
+pub const DRIFT_TAIL_MIN_NOISE: f64 = 3.0;
 
 /// Shortest run of constant input that counts as a hold, seconds (our assumption: long enough
 /// for a drift tail of 10-100 ms lags to show after the step's transient).

@@ -23,7 +23,9 @@
 //! Each is a number with a unit; [`Signatures::supports`] turns them into the gate the
 //! selection uses, [`Signatures::describe`] into words for the table.
 
-use super::{Data, HYST_LOOP_MIN_NOISE, LINE_RATIO_MIN, MAX_MODE_DAMPING, catalogue};
+use super::{
+    DRIFT_TAIL_MIN_NOISE, Data, HYST_LOOP_MIN_NOISE, LINE_RATIO_MIN, MAX_MODE_DAMPING, catalogue,
+};
 use crate::io::model_file::ModelFile;
 use model_core::params;
 use rustfft::{FftPlanner, num_complex::Complex};
@@ -282,6 +284,9 @@ impl Signatures {
             // The table's reversible slopes can take any scale or curvature too: hysteresis is
             // named only where the residual shows a loop.
             "hysteresis" => self.loop_v >= HYST_LOOP_MIN_NOISE * self.noise_v,
+            // Holds that show no tail show no creep (without holds the selection's give-way
+            // rule asks the static shapes instead).
+            "drift" => self.holds == 0 || self.tail_v >= DRIFT_TAIL_MIN_NOISE * self.noise_v,
             "resonance" => catalogue::fast_value(model, "resonance").is_some_and(|(f, z)| {
                 z <= MAX_MODE_DAMPING && self.line_ratio_near(f) >= LINE_RATIO_MIN
             }),
