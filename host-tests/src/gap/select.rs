@@ -6,8 +6,8 @@
 
 use super::catalogue::{self, EFFECTS, FAST, SLOW};
 use super::constants::{
-    CANNOT_TELL_RATIO, HOLD_MIN_S, MAX_STEPS, MIN_EXPLAINED, PRUNE_KEEP_EXCESS_VAR,
-    PRUNE_PER_PARAM, PRUNE_RATIO, STATIC_TELL_RATIO, STOP_FLOOR_RATIO,
+    CANNOT_TELL_RATIO, HOLD_MIN_S, MAX_STEPS, MIN_EXPLAINED, OFFSET_SHOWN_MIN,
+    PRUNE_KEEP_EXCESS_VAR, PRUNE_PER_PARAM, PRUNE_RATIO, STATIC_TELL_RATIO, STOP_FLOOR_RATIO,
 };
 use super::data::{Data, min_max, mse, noise_floor, sim};
 use super::everett::CentreLine;
@@ -581,10 +581,23 @@ pub fn diagnose(base: &ModelFile, data: &[Data], opts: &Options) -> anyhow::Resu
         // A second mode whose removal brings its own line back into the residual spectrum
         // stays, whatever the growth: a misfit of another effect's form (Bouc-Wen hysteresis
         // under play operators) can dominate the fast record and hide the growth.
+        // An offset the residual without it does not show (its line against the simulated
+        // output sits far nearer zero, or on the other side, than the fitted constant) worked
+        // through the refit of the others (a table's constant, a gain's polynomial), not as a
+        // level of the records: it goes whatever the growth (`offset_shown`).
+        let mut unshown: Option<(f64, f64)> = None;
         let weakest = trials
             .into_iter()
             .flatten()
             .map(|(e, m, s, ms)| {
+                if e.len() == 1 && e[0] == "offset" {
+                    let fitted_v = model.offset.as_ref().map_or(0.0, |o| o.offset_v);
+                    let level_v = signatures::compute(data, &s, &noise).level_v;
+                    if !offset_shown(fitted_v, level_v) {
+                        unshown = Some((fitted_v, level_v));
+                        return (e, m, s, ms, 0.0);
+                    }
+                }
                 let line_back = e.len() == 1
                     && e[0] == "resonance"
                     && signatures::compute(data, &s, &noise).supports(&e[0], &model);
@@ -626,11 +639,19 @@ pub fn diagnose(base: &ModelFile, data: &[Data], opts: &Options) -> anyhow::Resu
             } else {
                 String::new()
             };
-            steps.push(Step {
-                effect: e.clone(),
-                evidence: format!(
+            let evidence = match unshown {
+                Some((fitted_v, level_v)) if unit.len() == 1 && e == "offset" => format!(
+                    "removed in the final check: fitted at {:.1} mV, but the residual without it sits {:.1} mV off zero: the constant worked through the other effects' refit, not as a level of the records",
+                    1e3 * fitted_v,
+                    1e3 * level_v
+                ),
+                _ => format!(
                     "removed in the final check{with}: without it the residual above the noise floor grows only {ratio:.2}x (< {bar_e:.2}x)"
                 ),
+            };
+            steps.push(Step {
+                effect: e.clone(),
+                evidence,
                 params: serde_json::Map::new(),
                 rms_before_v: rms_before,
                 rms_after_v: rms_after,
@@ -696,6 +717,9 @@ pub fn diagnose(base: &ModelFile, data: &[Data], opts: &Options) -> anyhow::Resu
             },
         );
         let cur_score = score(&cur_mse, &named);
+        // An offset swapped in must be a level the residual shows (`offset_shown`), here the
+        // residual of the model it would join.
+        let cur_level_v = signatures::compute(data, &sims, &noise).level_v;
         let best = swaps
             .iter()
             .zip(trials)
@@ -710,7 +734,17 @@ pub fn diagnose(base: &ModelFile, data: &[Data], opts: &Options) -> anyhow::Resu
                 // a swap that trades a short fast record for it (an offset for the non-linear
                 // gain of the full thesis stage) is no explanation.
                 let harmless = ms.iter().zip(&cur_mse).all(|(a, b)| *a <= *b * 1.001);
-                (harmless && sc < cur_score).then_some((e.clone(), f.clone(), set, m, s, ms, sc))
+                let shown = f != "offset"
+                    || offset_shown(m.offset.as_ref().map_or(0.0, |o| o.offset_v), cur_level_v);
+                (harmless && shown && sc < cur_score).then_some((
+                    e.clone(),
+                    f.clone(),
+                    set,
+                    m,
+                    s,
+                    ms,
+                    sc,
+                ))
             })
             .min_by(|a, b| a.6.total_cmp(&b.6));
         if let Some((e, f, set, m, s, ms, sc)) = best {
@@ -786,6 +820,13 @@ fn at_floor_now(cur_mse: &[f64], var: &[f64]) -> bool {
         .iter()
         .zip(var)
         .all(|(m, v)| *m <= STOP_FLOOR_RATIO * STOP_FLOOR_RATIO * v)
+}
+
+/// Does the residual without a fitted `offset` (the others refitted) show it? Its line
+/// against the simulated output must sit on the constant's side of zero, at least
+/// [`OFFSET_SHOWN_MIN`] of the fitted value away from it.
+fn offset_shown(fitted_v: f64, level_v: f64) -> bool {
+    fitted_v * level_v > 0.0 && level_v.abs() >= OFFSET_SHOWN_MIN * fitted_v.abs()
 }
 
 /// The final check's bar for removing `unit`: the growth of the residual above the floor
