@@ -672,8 +672,9 @@ pub fn diagnose(base: &ModelFile, data: &[Data], opts: &Options) -> anyhow::Resu
     // cannot tell from it (without holds, a drift lag's mean over a sine acts as an offset);
     // each named slow effect is replaced in turn by each slow effect not named, the slow set
     // refitted, and the swap kept if it lowers the score over all records and no record's
-    // residual power grows.
-    if !at_floor_now(&cur_mse, &var) {
+    // residual power grows. At the floor too: a form that fits as well with fewer parameters
+    // (an offset and a scale for a polynomial gain and an offset) is the one to name.
+    {
         let n_all: f64 = data.iter().map(|d| d.len() as f64).sum();
         let score = |ms: &[f64], set: &[String]| -> f64 {
             data.iter()
