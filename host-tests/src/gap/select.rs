@@ -718,9 +718,10 @@ pub fn diagnose(base: &ModelFile, data: &[Data], opts: &Options) -> anyhow::Resu
             },
         );
         let cur_score = score(&cur_mse, &named);
-        // An offset swapped in must be a level the residual shows (`offset_shown`), here the
-        // residual of the model it would join.
-        let cur_level_v = signatures::compute(data, &sims, &noise).level_v;
+        // A swapped-in effect passes the steps' signature gate on the residual of the model
+        // it would join (a loop for hysteresis, a tail for drift where the records hold), and
+        // an offset must be a level that residual shows (`offset_shown`).
+        let cur_sigs = signatures::compute(data, &sims, &noise);
         let best = swaps
             .iter()
             .zip(trials)
@@ -735,8 +736,12 @@ pub fn diagnose(base: &ModelFile, data: &[Data], opts: &Options) -> anyhow::Resu
                 // a swap that trades a short fast record for it (an offset for the non-linear
                 // gain of the full thesis stage) is no explanation.
                 let harmless = ms.iter().zip(&cur_mse).all(|(a, b)| *a <= *b * 1.001);
-                let shown = f != "offset"
-                    || offset_shown(m.offset.as_ref().map_or(0.0, |o| o.offset_v), cur_level_v);
+                let shown = cur_sigs.supports(f, &m)
+                    && (f != "offset"
+                        || offset_shown(
+                            m.offset.as_ref().map_or(0.0, |o| o.offset_v),
+                            cur_sigs.level_v,
+                        ));
                 (harmless && shown && sc < cur_score).then_some((
                     e.clone(),
                     f.clone(),
