@@ -6,8 +6,8 @@
 
 use super::catalogue::{self, EFFECTS, FAST, SLOW};
 use super::constants::{
-    CANNOT_TELL_RATIO, HOLD_MIN_S, MAX_STEPS, MIN_EXPLAINED, OFFSET_SHOWN_MIN,
-    PRUNE_KEEP_EXCESS_VAR, PRUNE_PER_PARAM, PRUNE_RATIO, STATIC_TELL_RATIO, STOP_FLOOR_RATIO,
+    CANNOT_TELL_RATIO, HOLD_MIN_S, MAX_STEPS, MIN_EXPLAINED, PRUNE_KEEP_EXCESS_VAR,
+    PRUNE_PER_PARAM, PRUNE_RATIO, STATIC_TELL_RATIO, STOP_FLOOR_RATIO,
 };
 use super::data::{Data, min_max, mse, noise_floor, sim};
 use super::everett::CentreLine;
@@ -584,17 +584,19 @@ pub fn diagnose(base: &ModelFile, data: &[Data], opts: &Options) -> anyhow::Resu
         // An offset the residual without it does not show (its line against the simulated
         // output sits far nearer zero, or on the other side, than the fitted constant) worked
         // through the refit of the others (a table's constant, a gain's polynomial), not as a
-        // level of the records: it goes whatever the growth (`offset_shown`).
+        // level of the records: it goes whatever the growth (`Signatures::shows_offset`).
         let mut unshown: Option<(f64, f64)> = None;
         let weakest = trials
             .into_iter()
             .flatten()
             .map(|(e, m, s, ms)| {
                 if e.len() == 1 && e[0] == "offset" {
-                    let fitted_v = model.offset.as_ref().map_or(0.0, |o| o.offset_v);
-                    let level_v = signatures::compute(data, &s, &noise).level_v;
-                    if !offset_shown(fitted_v, level_v) {
-                        unshown = Some((fitted_v, level_v));
+                    let sigs = signatures::compute(data, &s, &noise);
+                    if !sigs.shows_offset(&model) {
+                        unshown = Some((
+                            model.offset.as_ref().map_or(0.0, |o| o.offset_v),
+                            sigs.level_v,
+                        ));
                         return (e, m, s, ms, 0.0);
                     }
                 }
@@ -720,7 +722,7 @@ pub fn diagnose(base: &ModelFile, data: &[Data], opts: &Options) -> anyhow::Resu
         let cur_score = score(&cur_mse, &named);
         // A swapped-in effect passes the steps' signature gate on the residual of the model
         // it would join (a loop for hysteresis, a tail for drift where the records hold), and
-        // an offset must be a level that residual shows (`offset_shown`).
+        // an offset must be a level that residual shows (`Signatures::shows_offset`).
         let cur_sigs = signatures::compute(data, &sims, &noise);
         let best = swaps
             .iter()
@@ -736,12 +738,8 @@ pub fn diagnose(base: &ModelFile, data: &[Data], opts: &Options) -> anyhow::Resu
                 // a swap that trades a short fast record for it (an offset for the non-linear
                 // gain of the full thesis stage) is no explanation.
                 let harmless = ms.iter().zip(&cur_mse).all(|(a, b)| *a <= *b * 1.001);
-                let shown = cur_sigs.supports(f, &m)
-                    && (f != "offset"
-                        || offset_shown(
-                            m.offset.as_ref().map_or(0.0, |o| o.offset_v),
-                            cur_sigs.level_v,
-                        ));
+                let shown =
+                    cur_sigs.supports(f, &m) && (f != "offset" || cur_sigs.shows_offset(&m));
                 (harmless && shown && sc < cur_score).then_some((
                     e.clone(),
                     f.clone(),
@@ -826,13 +824,6 @@ fn at_floor_now(cur_mse: &[f64], var: &[f64]) -> bool {
         .iter()
         .zip(var)
         .all(|(m, v)| *m <= STOP_FLOOR_RATIO * STOP_FLOOR_RATIO * v)
-}
-
-/// Does the residual without a fitted `offset` (the others refitted) show it? Its line
-/// against the simulated output must sit on the constant's side of zero, at least
-/// [`OFFSET_SHOWN_MIN`] of the fitted value away from it.
-fn offset_shown(fitted_v: f64, level_v: f64) -> bool {
-    fitted_v * level_v > 0.0 && level_v.abs() >= OFFSET_SHOWN_MIN * fitted_v.abs()
 }
 
 /// The final check's bar for removing `unit`: the growth of the residual above the floor

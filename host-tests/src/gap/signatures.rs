@@ -24,7 +24,8 @@
 //! selection uses, [`Signatures::describe`] into words for the table.
 
 use super::{
-    DRIFT_TAIL_MIN_NOISE, Data, HYST_LOOP_MIN_NOISE, LINE_RATIO_MIN, MAX_MODE_DAMPING, catalogue,
+    DRIFT_TAIL_MIN_NOISE, Data, HYST_LOOP_MIN_NOISE, LINE_RATIO_MIN, MAX_MODE_DAMPING,
+    OFFSET_SHOWN_MIN, catalogue,
 };
 use crate::io::model_file::ModelFile;
 use model_core::params;
@@ -292,6 +293,15 @@ impl Signatures {
             }),
             _ => true,
         }
+    }
+
+    /// Does this residual, of a model without `model`'s fitted offset, show that offset? Its
+    /// least-squares line against the simulated output must sit, at zero output, on the
+    /// constant's side of zero and at least [`OFFSET_SHOWN_MIN`] of its value away: a constant
+    /// the residual does not show worked through the refit of the other effects.
+    pub fn shows_offset(&self, model: &ModelFile) -> bool {
+        let fitted_v = model.offset.as_ref().map_or(0.0, |o| o.offset_v);
+        fitted_v * self.level_v > 0.0 && self.level_v.abs() >= OFFSET_SHOWN_MIN * fitted_v.abs()
     }
 
     /// The evidence for `effect` (as `model` has it) in words.
