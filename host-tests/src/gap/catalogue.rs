@@ -171,11 +171,13 @@ pub fn params_of(m: &ModelFile, effect: &str) -> Vec<(String, f64)> {
                 v.push((format!("gain{}", i + 1), d.gains[i]));
                 v.push((format!("tau{}_s", i + 1), d.taus_s[i]));
             }
-            // K(u) = k0 + k1 u + k2 u^2 + k3 u^3, shown when it is not 1.
+            // K(u) = k0 + k1 u + k2 u^2 + k3 u^3, shown when it is not 1, with the input
+            // above which it is held.
             if d.poly != [1.0, 0.0, 0.0, 0.0] {
                 for (i, k) in d.poly.iter().enumerate() {
                     v.push((format!("k{i}"), *k));
                 }
+                v.push(("k_held_above_v".into(), d.poly_range_v[1]));
             }
             v
         }),
@@ -294,8 +296,9 @@ pub struct SlowParams {
     pub hysteresis: Option<super::everett::HystFit>,
     /// K'(u) = 1 + c1 u + c2 u^2.
     pub gain: Option<(f64, f64)>,
-    /// The drift's K(u), lowest power first (`None`: K = 1).
-    pub drift_poly: Option<[f64; 4]>,
+    /// The drift's K(u), lowest power first, and the input above which it is held, volts
+    /// (`None`: K = 1).
+    pub drift_poly: Option<([f64; 4], f64)>,
     /// The sensor's scale error (factor on the nominal sensor gain).
     pub sensor_gain: Option<f64>,
     /// The sensor's offset, volts.
@@ -310,8 +313,8 @@ pub fn with_slow(m: &ModelFile, p: &SlowParams, u_range: (f64, f64)) -> Option<M
         m.drift = Some(DriftSection {
             gains,
             taus_s: taus,
-            poly: p.drift_poly.unwrap_or([1.0, 0.0, 0.0, 0.0]),
-            poly_range_v: [u_range.0, u_range.1],
+            poly: p.drift_poly.map_or([1.0, 0.0, 0.0, 0.0], |k| k.0),
+            poly_range_v: [u_range.0, p.drift_poly.map_or(u_range.1, |k| k.1)],
         });
     }
     if let Some(h) = &p.hysteresis {

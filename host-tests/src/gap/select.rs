@@ -6,8 +6,9 @@
 
 use super::catalogue::{self, EFFECTS, FAST, SLOW};
 use super::constants::{
-    CANNOT_TELL_RATIO, HOLD_MIN_S, MAX_STEPS, MIN_EXPLAINED, PRUNE_KEEP_EXCESS_VAR,
-    PRUNE_PER_PARAM, PRUNE_RATIO, STATIC_TELL_RATIO, STOP_FLOOR_RATIO,
+    CANDIDATE_ROUNDS, CANNOT_TELL_RATIO, HOLD_MIN_S, MAX_STEPS, MIN_EXPLAINED,
+    PRUNE_KEEP_EXCESS_VAR, PRUNE_PER_PARAM, PRUNE_RATIO, STATIC_TELL_RATIO, STOP_FLOOR_RATIO,
+    STRUCTURE_ROUNDS,
 };
 use super::data::{Data, min_max, mse, noise_floor, sim};
 use super::everett::CentreLine;
@@ -951,7 +952,7 @@ pub(super) fn refit_slow(
         .map(|d| sim(&b0, d))
         .collect::<anyhow::Result<_>>()
         .ok()?;
-    let p = fit_slow(data, &y0, slow_x, &set, u_range)?;
+    let p = fit_slow(data, &y0, slow_x, &set, u_range, STRUCTURE_ROUNDS)?;
     catalogue::with_slow(m, &p, u_range)
 }
 
@@ -997,7 +998,7 @@ fn candidates(
         }
     }
     let fitted: Vec<Option<ModelFile>> = par_map(&distinct, |set| {
-        fit_slow(data, &y0, slow_x, set, u_range)
+        fit_slow(data, &y0, slow_x, set, u_range, CANDIDATE_ROUNDS)
             .and_then(|p| catalogue::with_slow(model, &p, u_range))
     });
     for (effect, refit, set) in sets {
