@@ -649,15 +649,15 @@ fn the_thesis_table_alone_is_fitted_near_the_floor() {
 }
 
 /// The full thesis stage (`thesis-full`: Everett hysteresis, drift with its K(u), K'(u), slew
-/// limit, saturation, 2.5 mV noise) diagnosed from `thesis-linear`. Its K(u) is held above
-/// 6 V, which the catalogue's cubic on the records' range is not, and its table is not fitted
-/// fitted only to 2.3x the floor even alone (`the_thesis_table_alone_is_fitted_near_the_floor`),
-/// so the residual does not reach the floor, but the three slow effects must be named and
-/// kept, no effect the truth lacks named, and the gap must shrink: measured 663 mV to
-/// 12.46 mV (53x, 4.97x the floor) with drift, hysteresis, nonlinear-gain and the truth's
-/// slew limit (the records choose the `Span` split of the basis, and held levels tell the
-/// K'(u) curvature from a scale error: `select::held_level_error`). Before: 42.1 mV, 16.8x
-/// the floor, with a `sensor-gain` the truth lacks.
+/// limit, saturation, 2.5 mV noise) diagnosed from `thesis-linear`. Its table is fitted only
+/// to 2.3x the floor even alone (`the_thesis_table_alone_is_fitted_near_the_floor`), so the
+/// residual does not reach the floor, but the three slow effects must be named and kept, no
+/// effect the truth lacks named, and the gap must shrink: measured 663 mV to 8.1 mV (82x,
+/// 3.2x the floor) with drift, hysteresis, nonlinear-gain and the truth's slew limit (the
+/// records choose the `Span` split of the basis, held levels tell the K'(u) curvature from a
+/// scale error, `select::held_level_error`, and the drift's K(u) is held above a fitted
+/// knee, as the truth's is above 6 V). Before the knee (session 15): 12.46 mV, 4.97x the
+/// floor; before the two splits: 42.1 mV, 16.8x, with a `sensor-gain` the truth lacks.
 #[test]
 fn full_thesis_stage_names_its_slow_effects() {
     let truth = ModelFile::built_in("thesis-full").unwrap();
@@ -674,7 +674,7 @@ fn full_thesis_stage_names_its_slow_effects() {
     // Issue #12 asks for drift, hysteresis and nonlinear-gain: the catalogue's split (the
     // table the loop about the base model's reversible map, `nonlinear-gain` the centre line's
     // curvature, `everett::HYST_FIT_REVERSIBLE`). Asserted: those three named, and a cut of
-    // the residual of at least 10x (measured 53x, to 4.97x the floor; 15.8x with one split of
+    // the residual of at least 10x (measured 82x, to 3.2x the floor; 15.8x with one split of
     // the basis; the play-sum form cut 5.4x; fitting the bands' reversible slopes too cut
     // 14.8x but took K'(u) into the table and never named `nonlinear-gain`).
     for e in ["drift", "hysteresis", "nonlinear-gain"] {
@@ -702,9 +702,10 @@ fn full_thesis_stage_names_its_slow_effects() {
         "cut only {:.1}x",
         base_rms / d.final_rms_v
     );
-    // Measured 4.97x; 6x leaves room for the noise seed and fails on the former 16.8x.
+    // Measured 3.2x (the 150 s records of five seeds: 2.55-2.59x); 4x leaves room for the
+    // noise seed and fails on the 4.97x before the drift's knee.
     assert!(
-        d.final_rms_v <= 6.0 * d.noise_floor_v,
+        d.final_rms_v <= 4.0 * d.noise_floor_v,
         "final {:.1}x the floor",
         d.final_rms_v / d.noise_floor_v
     );
