@@ -712,13 +712,14 @@ fn full_thesis_stage_names_its_slow_effects() {
 }
 
 /// One 10 s record at 5 kHz of a 1 Hz sine over 0-9 V (the issue's real-record protocol) of
-/// the full thesis stage, from `thesis-linear`: the drift, whose removal raises the residual
-/// 2.6x (24.6 to 63.1 mV, 530 noise variances), is a true effect and must stay (with the keep
-/// rule at 1000 variances it was pruned and the record ended at 25x its floor; measured now
-/// 9.3x, asserted <= 12x). Named: hysteresis, drift and an `offset` the truth does not have
-/// (70 % of what is left lies in the first second, the stage's start from rest, which the
-/// fitted start memory and the drift's lags at rest do not match; a constant takes part of
-/// it). Asserted: hysteresis and drift among the names.
+/// the full thesis stage, from `thesis-linear`: the drift, whose removal raised the residual
+/// 2.6x in session 7, is a true effect and must stay (with the keep rule at 1000 variances it
+/// was pruned and the record ended at 25x its floor). Measured in session 15: hysteresis,
+/// drift and nonlinear-gain, 2.92 mV, 1.15x the floor. The record holds no level, so the
+/// drift's K(u) is not fitted (`slow_fit::fit_slow`): with it, a K held above a knee took the
+/// static curvature and `nonlinear-gain`, a true effect, was lost at 1.39x. Asserted: the
+/// three named, nothing the truth lacks, and within 2x the floor (the issue's bound for a
+/// single sine).
 #[test]
 fn a_sine_of_the_thesis_stage_keeps_its_drift() {
     let truth = ModelFile::built_in("thesis-full").unwrap();
@@ -731,14 +732,26 @@ fn a_sine_of_the_thesis_stage_keeps_its_drift() {
     let d = diagnose(&base, &data, &Options::default()).unwrap();
     println!("{}", d.table());
     let ratio = d.final_rms_v / d.noise_floor_v;
-    for e in ["hysteresis", "drift"] {
+    for e in ["hysteresis", "drift", "nonlinear-gain"] {
         assert!(
             d.named.iter().any(|n| n == e),
             "{e} not named: {:?}",
             d.named
         );
     }
-    assert!(ratio <= 12.0, "final {ratio:.2}x the floor");
+    let truth_effects = [
+        "drift",
+        "hysteresis",
+        "nonlinear-gain",
+        "slew-rate-limit",
+        "saturation",
+    ];
+    assert!(
+        d.named.iter().all(|n| truth_effects.contains(&n.as_str())),
+        "a name the truth lacks: {:?}",
+        d.named
+    );
+    assert!(ratio <= 2.0, "final {ratio:.2}x the floor");
     // A sine has no hold: the drift's evidence says so (it read "tails after steps up to
     // 0.0 mV during holds").
     let drift = d.steps.iter().find(|s| s.effect == "drift").unwrap();

@@ -863,6 +863,21 @@ pub const HELD_LEVEL_MIN_SEP_V: f64 = 0.1;
 /// against `nonlinear-gain` 198 (told apart the other way: the step's shape gives way to the
 /// nearer one, and the five seeds went from 18x the floor with drift and hysteresis alone to
 /// the truth's names).
+/// The distinct input levels the records hold ([`Data::holds`], levels closer than
+/// [`HELD_LEVEL_MIN_SEP_V`] counted once).
+pub(super) fn held_levels(data: &[Data]) -> usize {
+    let mut levels: Vec<f64> = Vec::new();
+    for d in data {
+        for h in d.holds() {
+            let u = d.u_v[h.start + (h.end - h.start) / 2];
+            if levels.iter().all(|l| (l - u).abs() > HELD_LEVEL_MIN_SEP_V) {
+                levels.push(u);
+            }
+        }
+    }
+    levels.len()
+}
+
 fn held_level_error(data: &[Data], sims: &[Vec<f64>], var: &[f64]) -> Option<f64> {
     let mut levels: Vec<f64> = Vec::new();
     let mut err = 0.0;

@@ -571,7 +571,12 @@ pub(super) fn fit_slow(
 ) -> Option<SlowParams> {
     let mut p = fit_slow_linear(data, y0, x, set, None)?;
     let couple = set.contains(&"hysteresis") && set.contains(&"nonlinear-gain");
-    let has_drift = set.contains(&"drift");
+    // The drift's K(u) shows as tails of different heights after steps to different levels;
+    // without held levels its `K(u) u` through the slow lags is a static curvature the
+    // records cannot tell from K'(u) (the thesis stage's 1 Hz sine named `nonlinear-gain`
+    // with K = 1 and lost it to a knee'd K, session 15).
+    let has_drift = set.contains(&"drift")
+        && super::select::held_levels(data) >= super::select::HELD_LEVELS_MIN;
     if !couple && !has_drift {
         return Some(p);
     }
