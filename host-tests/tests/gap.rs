@@ -648,6 +648,30 @@ fn the_thesis_table_alone_is_fitted_near_the_floor() {
     );
 }
 
+/// `thesis-full`'s slow effects (drift, hysteresis, nonlinear-gain) are named, and nothing
+/// beyond what the stage has over `thesis-linear` (those, its slew limit and saturation).
+fn assert_thesis_slow_effects_named(d: &gap::Diagnosis) {
+    for e in ["drift", "hysteresis", "nonlinear-gain"] {
+        assert!(
+            d.named.iter().any(|n| n == e),
+            "{e} not named: {:?}",
+            d.named
+        );
+    }
+    let truth_effects = [
+        "drift",
+        "hysteresis",
+        "nonlinear-gain",
+        "slew-rate-limit",
+        "saturation",
+    ];
+    assert!(
+        d.named.iter().all(|n| truth_effects.contains(&n.as_str())),
+        "a name the truth lacks: {:?}",
+        d.named
+    );
+}
+
 /// The full thesis stage (`thesis-full`: Everett hysteresis, drift with its K(u), K'(u), slew
 /// limit, saturation, 2.5 mV noise) diagnosed from `thesis-linear`. Its table is fitted only
 /// to 2.3x the floor even alone (`the_thesis_table_alone_is_fitted_near_the_floor`), so the
@@ -677,26 +701,7 @@ fn full_thesis_stage_names_its_slow_effects() {
     // the residual of at least 10x (measured 82x, to 3.2x the floor; 15.8x with one split of
     // the basis; the play-sum form cut 5.4x; fitting the bands' reversible slopes too cut
     // 14.8x but took K'(u) into the table and never named `nonlinear-gain`).
-    for e in ["drift", "hysteresis", "nonlinear-gain"] {
-        assert!(
-            d.named.iter().any(|n| n == e),
-            "{e} not named: {:?}",
-            d.named
-        );
-    }
-    // The truth's effects beyond thesis-linear: nothing else may be named.
-    let truth_effects = [
-        "drift",
-        "hysteresis",
-        "nonlinear-gain",
-        "slew-rate-limit",
-        "saturation",
-    ];
-    assert!(
-        d.named.iter().all(|n| truth_effects.contains(&n.as_str())),
-        "a name the truth lacks: {:?}",
-        d.named
-    );
+    assert_thesis_slow_effects_named(&d);
     assert!(
         d.final_rms_v * 10.0 <= base_rms,
         "cut only {:.1}x",
@@ -732,25 +737,7 @@ fn a_sine_of_the_thesis_stage_keeps_its_drift() {
     let d = diagnose(&base, &data, &Options::default()).unwrap();
     println!("{}", d.table());
     let ratio = d.final_rms_v / d.noise_floor_v;
-    for e in ["hysteresis", "drift", "nonlinear-gain"] {
-        assert!(
-            d.named.iter().any(|n| n == e),
-            "{e} not named: {:?}",
-            d.named
-        );
-    }
-    let truth_effects = [
-        "drift",
-        "hysteresis",
-        "nonlinear-gain",
-        "slew-rate-limit",
-        "saturation",
-    ];
-    assert!(
-        d.named.iter().all(|n| truth_effects.contains(&n.as_str())),
-        "a name the truth lacks: {:?}",
-        d.named
-    );
+    assert_thesis_slow_effects_named(&d);
     assert!(ratio <= 2.0, "final {ratio:.2}x the floor");
     // A sine has no hold: the drift's evidence says so (it read "tails after steps up to
     // 0.0 mV during holds").
