@@ -44,7 +44,8 @@ pub const DRIFT_REFINE_TOL_V2: f64 = 1e-10;
 /// ... or after this many passes.
 pub const DRIFT_REFINE_PASSES: usize = 12;
 /// Rounds of the slow fit's structural refinement (K(u) of the drift with its knee, K'(u) on
-/// the play sum) for a model the workflow keeps (a step's refit, the final check). Measured
+/// the play sum) for a model the workflow keeps (a step's refit, the final check), where a
+/// drift's K is fitted (without one, one round: K'(u) alone settles in it). Measured
 /// in session 15: with the knee, a drift of the thesis' own form (`thesis-full` without
 /// hysteresis, 150 s records) needs the second round (its time constants found with K = 1 are
 /// off until K is known): 2.44x the floor and a false `sensor-gain` with one round, 1.02x

@@ -584,6 +584,9 @@ pub(super) fn fit_slow(
         range: u_range,
         ..Shape::default()
     };
+    // The later rounds are for the drift's K (its time constants found with K = 1 are off
+    // until K is known); K'(u) on the play sum alone settles in one (session 14).
+    let rounds = if has_drift { rounds } else { rounds.min(1) };
     for _ in 0..rounds {
         if couple {
             shape.kprime = p.gain;
