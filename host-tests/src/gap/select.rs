@@ -847,6 +847,21 @@ pub const HELD_LEVELS_MIN: usize = 3;
 /// of a volt is a few per cent of the range a static shape bends over).
 pub const HELD_LEVEL_MIN_SEP_V: f64 = 0.1;
 
+/// The distinct input levels the records hold ([`Data::holds`], each read at the hold's
+/// middle; levels closer than [`HELD_LEVEL_MIN_SEP_V`] counted once).
+pub(super) fn held_levels(data: &[Data]) -> usize {
+    let mut levels: Vec<f64> = Vec::new();
+    for d in data {
+        for h in d.holds() {
+            let u = d.u_v[h.start + (h.end - h.start) / 2];
+            if levels.iter().all(|l| (l - u).abs() > HELD_LEVEL_MIN_SEP_V) {
+                levels.push(u);
+            }
+        }
+    }
+    levels.len()
+}
+
 /// How far a simulation leaves the records' held levels: over every hold of the records
 /// ([`Data::holds`]), the squared mean residual of the hold's second half (where a step's
 /// fast effects have settled), each in its record's noise variances (`var`), summed; `None`
@@ -863,23 +878,10 @@ pub const HELD_LEVEL_MIN_SEP_V: f64 = 0.1;
 /// against `nonlinear-gain` 198 (told apart the other way: the step's shape gives way to the
 /// nearer one, and the five seeds went from 18x the floor with drift and hysteresis alone to
 /// the truth's names).
-/// The distinct input levels the records hold ([`Data::holds`], levels closer than
-/// [`HELD_LEVEL_MIN_SEP_V`] counted once).
-pub(super) fn held_levels(data: &[Data]) -> usize {
-    let mut levels: Vec<f64> = Vec::new();
-    for d in data {
-        for h in d.holds() {
-            let u = d.u_v[h.start + (h.end - h.start) / 2];
-            if levels.iter().all(|l| (l - u).abs() > HELD_LEVEL_MIN_SEP_V) {
-                levels.push(u);
-            }
-        }
-    }
-    levels.len()
-}
-
 fn held_level_error(data: &[Data], sims: &[Vec<f64>], var: &[f64]) -> Option<f64> {
-    let mut levels: Vec<f64> = Vec::new();
+    if held_levels(data) < HELD_LEVELS_MIN {
+        return None;
+    }
     let mut err = 0.0;
     for ((d, s), &v) in data.iter().zip(sims).zip(var) {
         for h in d.holds() {
@@ -887,13 +889,9 @@ fn held_level_error(data: &[Data], sims: &[Vec<f64>], var: &[f64]) -> Option<f64
             let n = (h.end - from) as f64;
             let mean = (from..h.end).map(|i| d.y_v[i] - s[i]).sum::<f64>() / n;
             err += mean * mean / v.max(1e-18);
-            let u = d.u_v[from];
-            if levels.iter().all(|l| (l - u).abs() > HELD_LEVEL_MIN_SEP_V) {
-                levels.push(u);
-            }
         }
     }
-    (levels.len() >= HELD_LEVELS_MIN).then_some(err)
+    Some(err)
 }
 
 /// The hysteresis basis' centre line the records choose ([`CentreLine`]): hysteresis and

@@ -95,7 +95,8 @@ struct Shape {
     /// The drift's K(u) and the input above which it is held (its knee, volts): its lags
     /// see `K(u) u`.
     kdrift: Option<([f64; 4], f64)>,
-    /// The inputs' span: K and K' are held at its edges, as in the stage.
+    /// The inputs' span: K' is held at its edges and K below it (above, at its knee), as in
+    /// the stage.
     range: (f64, f64),
 }
 
@@ -761,6 +762,7 @@ fn fit_drift_poly(
     }
     // In that order: the fit's K (drawn towards 1 until valid, the first such kept as a
     // fallback), until one is valid as it stands.
+    let gg: f64 = gains.iter().map(|g| g * g).sum();
     let mut best: Option<([f64; 4], f64)> = None;
     for (_, q) in order {
         let mut g = DMatrix::<f64>::zeros(np, np);
@@ -776,7 +778,6 @@ fn fit_drift_poly(
         };
         // The lags of `u` came out at `s` times the present gains (least squares over the
         // three): K's constant term is `s`, so the other terms are taken relative to it.
-        let gg: f64 = gains.iter().map(|g| g * g).sum();
         let s = (0..3).map(|k| beta[k] * gains[k]).sum::<f64>() / gg;
         if s.is_nan() || s <= 0.0 {
             continue;
@@ -1504,29 +1505,14 @@ impl<'a> DriftProblem<'a> {
     }
 
     /// The lags' weighted products over the records: with themselves, with the target and
-    /// with each fixed column.
+    /// with each fixed column (an exact solve's; the searches' tries go through
+    /// [`Self::value`]).
     fn lag_products(&self, taus: &[f64; 3]) -> ([[f64; 3]; 3], [f64; 3], [Vec<f64>; 3]) {
-        let f: Vec<&DMatrix<f64>> = self.recs.iter().map(|r| &r.3).collect();
-        self.lag_products_with(taus, &f)
-    }
-
-    /// [`Self::lag_products`] with other fixed columns (`fixed`: per record, columns x rows at
-    /// the problem's rows).
-    fn lag_products_with(
-        &self,
-        taus: &[f64; 3],
-        fixed: &[&DMatrix<f64>],
-    ) -> ([[f64; 3]; 3], [f64; 3], [Vec<f64>; 3]) {
-        let nf = fixed.first().map_or(0, |f| f.nrows());
+        let nf = self.nf;
         let mut gll = [[0.0f64; 3]; 3];
         let mut gle = [0.0f64; 3];
         let mut glf = [vec![0.0f64; nf], vec![0.0f64; nf], vec![0.0f64; nf]];
-        for ((d, drive), ((w, idx, e, _), f)) in self
-            .data
-            .iter()
-            .zip(self.drive)
-            .zip(self.recs.iter().zip(fixed))
-        {
+        for ((d, drive), (w, idx, e, f)) in self.data.iter().zip(self.drive).zip(&self.recs) {
             let t = d.period_s();
             let a = taus.map(|tau| (-t / tau).exp());
             let mut lag = [drive[0]; 3];
