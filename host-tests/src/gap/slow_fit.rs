@@ -40,6 +40,8 @@ pub struct SlowRegressors {
     hyst: std::sync::Arc<Vec<Vec<Vec<f64>>>>,
     /// The hysteresis table's input range.
     range: (f64, f64),
+    /// The K'(u) the hysteresis columns in `cols` are scaled by (`None`: 1).
+    kprime: Option<(f64, f64)>,
     /// The hysteresis start memory the basis was computed with.
     start_v: Vec<f64>,
     /// The centre line the basis' loop columns leave out.
@@ -193,6 +195,7 @@ pub(super) fn slow_regressors(
         u_fit: std::sync::Arc::new(u_fit),
         hyst: std::sync::Arc::new(hyst),
         range,
+        kprime: None,
         start_v: start_v.to_vec(),
         form,
         table_gain,
@@ -460,18 +463,24 @@ fn slow_regressors_shaped(data: &[Data], shape: &Shape, base: &SlowRegressors) -
         u_fit: base.u_fit.clone(),
         hyst: base.hyst.clone(),
         range: base.range,
+        kprime: shape.kprime,
         start_v: base.start_v.clone(),
         form: base.form,
         table_gain: base.table_gain,
         gram: std::sync::OnceLock::new(),
     };
-    // Without K'(u) only the lags changed.
-    if shape.kprime.is_none()
+    // With the base's K'(u) only the lags changed.
+    if shape.kprime == base.kprime
         && let Some(g) = base.gram.get()
     {
         let _ = x.gram.set(gram_new_lags(&x, g));
     }
     x
+}
+
+/// The dot product of two columns.
+fn dot(a: &[f64], b: &[f64]) -> f64 {
+    a.iter().zip(b).map(|(x, y)| x * y).sum()
 }
 
 /// The weighted Gram matrix of the input-only columns and the offset's ([`SlowRegressors`]'
@@ -486,8 +495,11 @@ fn input_gram(x: &SlowRegressors) -> DMatrix<f64> {
         // times itself: a blocked product (nalgebra's gemm), several times the speed of a
         // row-by-row sum over the two hundred columns of the hysteresis basis; the other
         // split's columns (zero, never solved for) are left out.
-        let m = design(cols, rows.len(), &active);
-        let gl = m.transpose() * &m;
+        let mut gl = DMatrix::<f64>::zeros(active.len(), active.len());
+        for block in row_blocks(rows.len()) {
+            let m = design(cols, block, &active);
+            gl += m.transpose() * &m;
+        }
         for (i, &ci) in active.iter().enumerate() {
             for (j, &cj) in active.iter().enumerate() {
                 g[(ci, cj)] += w * gl[(i, j)];
@@ -506,17 +518,29 @@ fn active_cols(form: everett::CentreLine) -> Vec<usize> {
         .collect()
 }
 
-/// A record's design matrix over the `active` columns (the offset's ones last).
-fn design(cols: &[Vec<f64>], n: usize, active: &[usize]) -> DMatrix<f64> {
-    let mut m = DMatrix::<f64>::zeros(n, active.len());
+/// A record's design matrix over the `active` columns (the offset's ones last), at its rows
+/// `block`.
+fn design(cols: &[Vec<f64>], block: std::ops::Range<usize>, active: &[usize]) -> DMatrix<f64> {
+    let mut m = DMatrix::<f64>::zeros(block.len(), active.len());
     for (k, &c) in active.iter().enumerate() {
         if c == COL_OFFSET {
             m.column_mut(k).fill(1.0);
         } else {
-            m.column_mut(k).copy_from_slice(&cols[c]);
+            m.column_mut(k).copy_from_slice(&cols[c][block.clone()]);
         }
     }
     m
+}
+
+/// Rows a Gram product takes at a time: a block of the design matrix stays in the cache
+/// (a record's whole one is tens of megabytes).
+const GRAM_BLOCK_ROWS: usize = 1024;
+
+/// The blocks of [`GRAM_BLOCK_ROWS`] rows of `n`.
+fn row_blocks(n: usize) -> impl Iterator<Item = std::ops::Range<usize>> {
+    (0..n)
+        .step_by(GRAM_BLOCK_ROWS)
+        .map(move |a| a..(a + GRAM_BLOCK_ROWS).min(n))
 }
 
 /// [`input_gram`] of regressors whose columns differ from `base`'s (Gram matrix `g_base`)
@@ -534,9 +558,12 @@ fn gram_new_lags(x: &SlowRegressors, g_base: &DMatrix<f64>) -> DMatrix<f64> {
     }
     for (cols, rows) in x.cols.iter().zip(&x.rows) {
         let w = 1.0 / rows.len().max(1) as f64;
-        let l = design(cols, rows.len(), &lags);
-        let m = design(cols, rows.len(), &active);
-        let gl = l.transpose() * &m;
+        let mut gl = DMatrix::<f64>::zeros(lags.len(), active.len());
+        for block in row_blocks(rows.len()) {
+            let l = design(cols, block.clone(), &lags);
+            let m = design(cols, block, &active);
+            gl += l.transpose() * &m;
+        }
         for (i, &ci) in lags.iter().enumerate() {
             for (j, &cj) in active.iter().enumerate() {
                 g[(ci, cj)] += w * gl[(i, j)];
@@ -592,11 +619,30 @@ pub(super) fn fit_slow(
         if couple {
             shape.kprime = p.gain;
         }
-        if has_drift && let Some(k) = fit_drift_poly(data, y0, x, &shape, &p) {
+        // The regressors with this round's K'(u) and K = 1, their Gram matrix computed once:
+        // K(u)'s fit takes its fixed columns' block from it, and the round's solve (only the
+        // lags changed) all but the lags' rows.
+        let plain_shape = Shape {
+            kdrift: None,
+            ..shape
+        };
+        let plain = if plain_shape.kprime == x.kprime && plain_shape.kdrift.is_none() {
+            None
+        } else {
+            Some(slow_regressors_shaped(data, &plain_shape, x))
+        };
+        let plain = plain.as_ref().unwrap_or(x);
+        if has_drift && let Some(k) = fit_drift_poly(data, y0, plain, &shape, &p) {
             shape.kdrift = Some(k);
         }
-        let xs = slow_regressors_shaped(data, &shape, x);
-        match fit_slow_linear(data, y0, &xs, set, p.drift.map(|d| d.1)) {
+        let shaped;
+        let xs = if shape.kdrift.is_some() {
+            shaped = slow_regressors_shaped(data, &shape, plain);
+            &shaped
+        } else {
+            plain
+        };
+        match fit_slow_linear(data, y0, xs, set, p.drift.map(|d| d.1)) {
             Some(mut q) => {
                 q.drift_poly = shape.kdrift;
                 p = q;
@@ -633,11 +679,6 @@ fn fit_drift_poly(
     p: &SlowParams,
 ) -> Option<([f64; 4], f64)> {
     let (gains, taus) = p.drift?;
-    let plain = Shape {
-        kdrift: None,
-        ..*shape
-    };
-    let xs = slow_regressors_shaped(data, &plain, x);
     let mut fixed: Vec<usize> = Vec::new();
     if p.hysteresis.is_some() {
         fixed.extend(hyst_cols(x.form));
@@ -656,9 +697,18 @@ fn fit_drift_poly(
     let nk = knees.len();
     let nf = fixed.len();
     let np = 6 + nf;
-    // The fixed columns' block is the same for every knee: computed once. Per knee only the
-    // six drift columns' products with everything.
-    let mut g_ff = DMatrix::<f64>::zeros(nf, nf);
+    let nd = 6 * nk;
+    // The fixed columns' block is the same for every knee and, but for the sensor gain's
+    // products, the regressors' own Gram matrix (computed once, and kept for the round's
+    // solve). Per knee only the six drift columns' products with everything.
+    let g_in = x.gram.get_or_init(|| input_gram(x));
+    let mut g_ff = DMatrix::<f64>::from_fn(nf, nf, |i, j| {
+        if fixed[i] == COL_SGAIN || fixed[j] == COL_SGAIN {
+            0.0
+        } else {
+            g_in[(fixed[i], fixed[j])]
+        }
+    });
     let mut b_f = DVector::<f64>::zeros(nf);
     let mut g_d = vec![DMatrix::<f64>::zeros(6, np); nk];
     let mut b_d = vec![DVector::<f64>::zeros(6); nk];
@@ -680,25 +730,19 @@ fn fit_drift_poly(
         let rows = &x.rows[r];
         let n = rows.len();
         let w = 1.0 / n.max(1) as f64;
-        // The fixed columns (row-major, the transposed design matrix), each knee's drift
-        // columns and the target at the settled samples: blocked products at the end.
-        let mut ff: Vec<f64> = Vec::with_capacity(n * nf);
-        let mut fd: Vec<Vec<f64>> = vec![Vec::with_capacity(n * 6); nk];
-        let mut ev: Vec<f64> = Vec::with_capacity(n);
+        // Every knee's six drift columns at the settled samples, row-major (a row's `6 nk`
+        // values side by side, so a product with a column runs over them in lanes).
+        let mut dr: Vec<f64> = Vec::with_capacity(n * nd);
         let mut next = 0usize;
         for i in 0..d.len() {
             if next < n && rows[next] == i {
-                for &col in &fixed {
-                    ff.push(self::col(&xs, y0, r, col, next));
-                }
-                for q in 0..nk {
-                    fd[q].extend_from_slice(&lu);
+                for l in &lp {
+                    dr.extend_from_slice(&lu);
                     for j in 0..3 {
-                        fd[q].push((0..3).map(|k| gains[k] * lp[q][3 * j + k]).sum());
+                        dr.push((0..3).map(|k| gains[k] * l[3 * j + k]).sum());
                     }
                 }
                 next += 1;
-                ev.push(d.y_v[i] - y0[r][i]);
             }
             let u = d.u_v[i];
             for k in 0..3 {
@@ -711,17 +755,60 @@ fn fit_drift_poly(
                 }
             }
         }
-        let e = DVector::from_column_slice(&ev);
-        let f = DMatrix::from_vec(nf, n, ff);
-        g_ff += (&f * f.transpose()) * w;
-        b_f.axpy(w, &(&f * &e), 1.0);
+        let e: Vec<f64> = rows.iter().map(|&i| d.y_v[i] - y0[r][i]).collect();
+        let s: Vec<f64> = rows.iter().map(|&i| y0[r][i]).collect();
+        let ones = vec![1.0; n];
+        let column = |c: usize| -> &[f64] {
+            match c {
+                COL_OFFSET => &ones,
+                COL_SGAIN => &s,
+                _ => &x.cols[r][c],
+            }
+        };
+        // The drift columns' products with a column, all knees at once.
+        let with_drift = |v: &[f64]| -> Vec<f64> {
+            let mut acc = vec![0.0; nd];
+            for (row, vi) in dr.chunks_exact(nd).zip(v) {
+                for (a, di) in acc.iter_mut().zip(row) {
+                    *a += vi * di;
+                }
+            }
+            acc
+        };
+        for (i, &ci) in fixed.iter().enumerate() {
+            let ci_v = column(ci);
+            b_f[i] += w * dot(ci_v, &e);
+            if ci == COL_SGAIN {
+                for (j, &cj) in fixed.iter().enumerate() {
+                    let gs = w * dot(ci_v, column(cj));
+                    g_ff[(i, j)] += gs;
+                    if i != j {
+                        g_ff[(j, i)] += gs;
+                    }
+                }
+            }
+            let gd = with_drift(ci_v);
+            for q in 0..nk {
+                for k in 0..6 {
+                    g_d[q][(k, 6 + i)] += w * gd[6 * q + k];
+                }
+            }
+        }
+        let be = with_drift(&e);
+        for row in dr.chunks_exact(nd) {
+            for q in 0..nk {
+                let v = &row[6 * q..6 * q + 6];
+                for k in 0..6 {
+                    for l in 0..6 {
+                        g_d[q][(k, l)] += w * v[k] * v[l];
+                    }
+                }
+            }
+        }
         for q in 0..nk {
-            let dq = DMatrix::from_vec(6, n, std::mem::take(&mut fd[q]));
-            let mut gd = g_d[q].columns_mut(0, 6);
-            gd += (&dq * dq.transpose()) * w;
-            let mut gf = g_d[q].columns_mut(6, nf);
-            gf += (&dq * f.transpose()) * w;
-            b_d[q].axpy(w, &(&dq * &e), 1.0);
+            for k in 0..6 {
+                b_d[q][k] += w * be[6 * q + k];
+            }
         }
     }
     let nonneg: Vec<bool> = (0..np)
@@ -1405,6 +1492,60 @@ fn add_weighted_gram(
     b.axpy(w, &(ft * DVector::from_column_slice(e)), 1.0);
 }
 
+/// Record `r`'s columns `cols` at the regressors' rows `js` (all where `None`), as a
+/// columns x rows matrix (the transposed design matrix).
+fn fixed_at(
+    x: &SlowRegressors,
+    y0: &[Vec<f64>],
+    r: usize,
+    cols: &[usize],
+    js: Option<&[usize]>,
+) -> DMatrix<f64> {
+    let n = js.map_or(x.rows[r].len(), <[usize]>::len);
+    let mut f = Vec::with_capacity(n * cols.len());
+    for j in 0..n {
+        let j = js.map_or(j, |js| js[j]);
+        f.extend(cols.iter().map(|&c| col(x, y0, r, c, j)));
+    }
+    DMatrix::from_vec(cols.len(), n, f)
+}
+
+/// The products of record `r`'s column `c` at the regressors' rows `js` (all where `None`)
+/// with the three lags `v`, the column read once.
+fn fixed_dot3(
+    x: &SlowRegressors,
+    y0: &[Vec<f64>],
+    r: usize,
+    c: usize,
+    js: Option<&[usize]>,
+    v: &[Vec<f64>; 3],
+) -> [f64; 3] {
+    let mut acc = [0.0f64; 3];
+    match (c, js) {
+        (COL_OFFSET, _) => {
+            for k in 0..3 {
+                acc[k] = v[k].iter().sum();
+            }
+        }
+        (COL_SGAIN, _) | (_, Some(_)) => {
+            for j in 0..v[0].len() {
+                let cj = col(x, y0, r, c, js.map_or(j, |js| js[j]));
+                for k in 0..3 {
+                    acc[k] += cj * v[k][j];
+                }
+            }
+        }
+        (_, None) => {
+            for (j, cj) in x.cols[r][c].iter().enumerate() {
+                for k in 0..3 {
+                    acc[k] += cj * v[k][j];
+                }
+            }
+        }
+    }
+    acc
+}
+
 /// The warm start ([`nnls_normal_from`]) a drift solve passes to the next: its three lags
 /// (first) free, the other columns where the solve left them positive.
 fn warm_set(beta: &[f64]) -> Vec<bool> {
@@ -1415,17 +1556,21 @@ fn warm_set(beta: &[f64]) -> Vec<bool> {
 }
 
 /// The drift refinement's fixed part, computed once per [`fit_slow`] call: per record the
-/// target and the fixed columns at the settled samples (the transposed design matrix,
-/// columns x rows), and the weighted Gram matrix of the fixed columns, so that each evaluation
-/// only runs the three lags and their cross products.
+/// target at the settled samples, and the weighted Gram matrix of the fixed columns, so that
+/// each evaluation only runs the three lags and their products (the fixed columns read where
+/// the regressors keep them).
 struct DriftProblem<'a> {
     data: &'a [Data],
+    /// The regressors the fixed columns are read from, and the model's output without slow
+    /// effects (the sensor gain's column).
+    x: &'a SlowRegressors,
+    y0: &'a [Vec<f64>],
     /// Per record: the lags' input (`K(u) u`).
     drive: &'a [Vec<f64>],
     /// Per record: the drive's runs of equal values ([`drive_runs`]).
     runs: Vec<Vec<(usize, usize, usize)>>,
-    /// Per record: (weight, settled sample indices, target at them, fixed columns as a
-    /// columns x rows matrix).
+    /// Per record: (weight, settled sample indices, target at them, their positions among
+    /// the regressors' rows).
     recs: Vec<DriftRecord>,
     /// The fixed columns (indices into the regressors).
     fixed: Vec<usize>,
@@ -1440,9 +1585,9 @@ struct DriftProblem<'a> {
     table_gain: f64,
 }
 
-/// One record of a [`DriftProblem`]: (weight, settled sample indices, target at them, fixed
-/// columns as a columns x rows matrix).
-type DriftRecord = (f64, Vec<usize>, Vec<f64>, DMatrix<f64>);
+/// One record of a [`DriftProblem`]: (weight, settled sample indices, target at them, their
+/// positions among the regressors' rows, `None` where they are all of them).
+type DriftRecord = (f64, Vec<usize>, Vec<f64>, Option<Vec<usize>>);
 
 impl<'a> DriftProblem<'a> {
     /// The problem on the regressors' rows, evenly thinned to at most `max_rows` a record;
@@ -1450,7 +1595,7 @@ impl<'a> DriftProblem<'a> {
     /// when no record is thinned).
     fn new(
         data: &'a [Data],
-        y0: &[Vec<f64>],
+        y0: &'a [Vec<f64>],
         x: &'a SlowRegressors,
         fixed: &[usize],
         g: &DMatrix<f64>,
@@ -1458,30 +1603,24 @@ impl<'a> DriftProblem<'a> {
         max_rows: usize,
     ) -> Self {
         let nf = fixed.len();
-        let mut thinned = false;
         let recs: Vec<DriftRecord> = data
             .iter()
             .enumerate()
             .map(|(r, d)| {
                 let stride = x.rows[r].len().div_ceil(max_rows.max(1)).max(1);
-                thinned |= stride > 1;
                 let js: Vec<usize> = (0..x.rows[r].len()).step_by(stride).collect();
                 let idx: Vec<usize> = js.iter().map(|&j| x.rows[r][j]).collect();
                 let w = 1.0 / idx.len().max(1) as f64;
                 let e = idx.iter().map(|&i| d.y_v[i] - y0[r][i]).collect();
-                let mut f = Vec::with_capacity(idx.len() * nf);
-                for &j in &js {
-                    f.extend(fixed.iter().map(|&c| col(x, y0, r, c, j)));
-                }
-                let f = DMatrix::from_vec(nf, js.len(), f);
-                (w, idx, e, f)
+                (w, idx, e, (stride > 1).then_some(js))
             })
             .collect();
-        let (g_ff, b_f) = if thinned {
+        let (g_ff, b_f) = if recs.iter().any(|r| r.3.is_some()) {
             let mut g_ff = DMatrix::<f64>::zeros(nf, nf);
             let mut b_f = DVector::<f64>::zeros(nf);
-            for (w, _, e, f) in &recs {
-                add_weighted_gram(&mut g_ff, &mut b_f, f, e, *w);
+            for (r, (w, _, e, js)) in recs.iter().enumerate() {
+                let f = fixed_at(x, y0, r, fixed, js.as_deref());
+                add_weighted_gram(&mut g_ff, &mut b_f, &f, e, *w);
             }
             (g_ff, b_f)
         } else {
@@ -1492,6 +1631,8 @@ impl<'a> DriftProblem<'a> {
         };
         Self {
             data,
+            x,
+            y0,
             drive: &x.drive,
             runs: x.drive.iter().map(|d| drive_runs(d)).collect(),
             recs,
@@ -1512,17 +1653,21 @@ impl<'a> DriftProblem<'a> {
         let mut gll = [[0.0f64; 3]; 3];
         let mut gle = [0.0f64; 3];
         let mut glf = [vec![0.0f64; nf], vec![0.0f64; nf], vec![0.0f64; nf]];
-        for ((d, drive), (w, idx, e, f)) in self.data.iter().zip(self.drive).zip(&self.recs) {
+        for (r, ((d, drive), (w, idx, e, js))) in
+            self.data.iter().zip(self.drive).zip(&self.recs).enumerate()
+        {
             let t = d.period_s();
             let a = taus.map(|tau| (-t / tau).exp());
             let mut lag = [drive[0]; 3];
             let mut ll = [[0.0f64; 3]; 3];
             let mut le = [0.0f64; 3];
-            // The fixed columns' products with the lags, accumulated as the lags advance: one
-            // pass over the fixed columns (stored column by column, `nf` values a row), which
-            // are megabytes a record and bound the solve by memory, not by arithmetic.
-            let mut lf = [vec![0.0f64; nf], vec![0.0f64; nf], vec![0.0f64; nf]];
-            let fs = f.as_slice();
+            // The lags at the rows; their products with the fixed columns after, one column
+            // at a time where the regressors keep it.
+            let mut at = [
+                Vec::with_capacity(idx.len()),
+                Vec::with_capacity(idx.len()),
+                Vec::with_capacity(idx.len()),
+            ];
             let mut next = 0usize;
             for (j, &i) in idx.iter().enumerate() {
                 // Advance the lags to sample i (their value there uses inputs before i).
@@ -1537,12 +1682,18 @@ impl<'a> DriftProblem<'a> {
                     for l in 0..=k {
                         ll[k][l] += lag[k] * lag[l];
                     }
+                    at[k].push(lag[k]);
                 }
-                let fj = &fs[j * nf..(j + 1) * nf];
-                for (acc, l) in lf.iter_mut().zip(lag) {
-                    for (a, &x) in acc.iter_mut().zip(fj) {
-                        *a += x * l;
-                    }
+            }
+            let mut lf = [
+                vec![0.0f64; self.nf],
+                vec![0.0f64; self.nf],
+                vec![0.0f64; self.nf],
+            ];
+            for (q, &c) in self.fixed.iter().enumerate() {
+                let p = fixed_dot3(self.x, self.y0, r, c, js.as_deref(), &at);
+                for k in 0..3 {
+                    lf[k][q] = p[k];
                 }
             }
             for k in 0..3 {
@@ -1673,10 +1824,12 @@ impl<'a> DriftProblem<'a> {
         let (_, _, beta_a) = self.solve_full(taus)?;
         let schur = Schur::new(&self.g_ff, &self.b_f, &self.fixed, self.table_gain, &beta_a)?;
         let keep = schur.free_fixed();
+        let free: Vec<usize> = keep.iter().map(|&i| self.fixed[i]).collect();
         let free_cols = self
             .recs
             .iter()
-            .map(|r| DMatrix::from_fn(keep.len(), r.3.ncols(), |i, j| r.3[(keep[i], j)]))
+            .enumerate()
+            .map(|(r, rec)| fixed_at(self.x, self.y0, r, &free, rec.3.as_deref()))
             .collect();
         Some(SchurSearch {
             schur,
