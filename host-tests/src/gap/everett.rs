@@ -269,14 +269,28 @@ pub fn hyst_range(lo: f64, hi: f64, form: CentreLine) -> (f64, f64) {
     (lo, hi)
 }
 
+/// The decaying oscillations among the start candidates: (first amplitude as a share of the
+/// span, ratio of each turn's amplitude to the last). Our assumption: 0.6 is a scan that died
+/// away quickly; 0.85 (up to 25 turns) comes close to the anti-diagonal itself, the state of
+/// every play operator centred on the first input.
+pub const START_DECAYS: [(f64, f64); 6] = [
+    (0.125, 0.6),
+    (0.25, 0.6),
+    (0.5, 0.6),
+    (0.125, 0.85),
+    (0.25, 0.85),
+    (0.5, 0.85),
+];
+
 /// The start memories tried for records whose first input is `u0_v`, on a table over `range`
 /// (turning points after coming up from the bottom, as `[hysteresis] start_turns_v`): none
 /// (the major rising curve); came down from above (`[p]`, five heights); came down from the
 /// top to `v` and up again (`[hi, v]`, three depths); and a decaying oscillation around
-/// `u0` (`u0 +- A, u0 -+ 0.6 A, ...` down to 1 % of the span, three amplitudes, first
-/// excursion up or down: the state a stage is left in after a scan that died away, close to
-/// the Preisach plane's anti-diagonal). Our assumption: a lab record starts from rest after
-/// one of these; 15 candidates, each checked in one simulation of the fitted model.
+/// `u0` (`u0 +- A, u0 -+ r A, ...` down to 1 % of the span, three amplitudes, ratios `r` 0.6
+/// and 0.85 ([`START_DECAYS`]), first excursion up or down: the state a stage is left in
+/// after a scan that died away, close to the Preisach plane's anti-diagonal). Our
+/// assumption: a lab record starts from rest after one of these; 21 candidates, each checked
+/// in one simulation of the fitted model.
 pub fn start_candidates(u0_v: f64, range: (f64, f64)) -> Vec<Vec<f64>> {
     let (lo, hi) = range;
     let u0 = u0_v.clamp(lo, hi);
@@ -294,14 +308,14 @@ pub fn start_candidates(u0_v: f64, range: (f64, f64)) -> Vec<Vec<f64>> {
             out.push(vec![hi, v]);
         }
     }
-    for a in [0.125, 0.25, 0.5] {
+    for (a, ratio) in START_DECAYS {
         for sign in [1.0, -1.0] {
             let mut amp = a * span;
             let mut s = sign;
             let mut h = Vec::new();
             while amp > 0.01 * span && h.len() < crate::io::model_file::MAX_START_TURNS {
                 h.push((u0 + s * amp).clamp(lo, hi));
-                amp *= 0.6;
+                amp *= ratio;
                 s = -s;
             }
             out.push(h);
