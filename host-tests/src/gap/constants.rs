@@ -88,6 +88,13 @@ pub const DRIFT_TAU_MAX_RECORDS: f64 = 2.0;
 /// gap between two bin means of 20 samples or more stays near one noise sigma; three is a
 /// loop, not noise; a sensor-gain error with 1 mV of noise shows 0.5 mV, a real loop hundreds).
 pub const HYST_LOOP_MIN_NOISE: f64 = 3.0;
+/// Holds a record of steps alone needs for its held levels' loop ([`super::signatures`]):
+/// a quadratic and the direction's term are four parameters (our assumption: one more than
+/// that, so the loop's estimate has a residual to be judged against).
+pub const HELD_LOOP_MIN_HOLDS: usize = 5;
+/// Shortest hold whose level counts towards that loop, seconds (our assumption: the thesis'
+/// plant settles in about 1 ms, and the hold's second half, from 10 ms on, is its level).
+pub const HELD_LOOP_MIN_S: f64 = 0.02;
 /// The residual's largest tail during a hold ([`super::signatures::Signatures::tail_v`]) that
 /// `drift` needs where the records hold their input, in noise floors (our assumption: a tail
 /// is the difference of two means of a tenth of a hold of 0.2 s or more, so noise alone moves

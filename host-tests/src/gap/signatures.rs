@@ -13,7 +13,10 @@
 //! * **tails** (holds of at least 0.2 s): how far the residual moves from shortly after a step
 //!   to the end of the hold: drift;
 //! * **loop** (slowly moving input): the largest gap between the residual on rising and on
-//!   falling input at the same input level: hysteresis;
+//!   falling input at the same input level: hysteresis; in a record of steps alone (random
+//!   levels, no input that moves slowly) the gap between held levels reached from below and
+//!   from above, a static quadratic taken out, which counts only where the holds show no
+//!   tail (a creep that has not caught up leaves the same pattern);
 //! * **static curve** (settled samples): the curvature of the residual against the input:
 //!   non-linear gain;
 //! * **range**: whether the input comes near the amplifier's limits: saturation;
@@ -23,12 +26,14 @@
 //! Each is a number with a unit; [`Signatures::supports`] turns them into the gate the
 //! selection uses, [`Signatures::describe`] into words for the table.
 
+use super::constants::{HELD_LOOP_MIN_HOLDS, HELD_LOOP_MIN_S};
 use super::{
     DRIFT_TAIL_MIN_NOISE, Data, HYST_LOOP_MIN_NOISE, LINE_RATIO_MIN, MAX_MODE_DAMPING,
     OFFSET_SHOWN_MIN, catalogue,
 };
 use crate::io::model_file::ModelFile;
 use model_core::params;
+use nalgebra::{DMatrix, DVector};
 use rustfft::{FftPlanner, num_complex::Complex};
 
 /// The measured signatures of a residual.
@@ -45,6 +50,10 @@ pub struct Signatures {
     pub holds: usize,
     /// Largest rising/falling gap of the residual at equal input, volts.
     pub loop_v: f64,
+    /// Largest gap between held levels reached from below and from above at equal input, in
+    /// records of steps alone (no input that moves slowly), volts: the residual of each
+    /// hold's second half fitted to a static quadratic and the direction of the step into it.
+    pub held_loop_v: f64,
     /// Curvature of the residual against the input (largest deviation from the chord), volts.
     pub curve_v: f64,
     /// Input span (min, max), volts.
@@ -65,6 +74,42 @@ pub struct Signatures {
 /// Samples per Welch segment of the line test (our assumption: about 20 ms at 50 kHz, so a
 /// mode damped by 0.02 at 3 kHz, whose line is 120 Hz wide, spans a few 49 Hz bins).
 pub const WELCH_SEGMENT: usize = 1024;
+
+/// The loop of a record's held levels (`None` with fewer than [`HELD_LOOP_MIN_HOLDS`] holds
+/// of [`HELD_LOOP_MIN_S`] or more after a step, or fewer than two reached each way): the
+/// residual's mean over each hold's second half (settled), fitted by least squares to a
+/// static quadratic in the input plus `g` times the direction of the step into the hold (+1
+/// up, -1 down); the loop is `2 |g|`, the gap between levels reached from below and from
+/// above at equal input. The quadratic takes a scale, an offset or a curvature of the static
+/// map, which do not depend on the direction.
+fn held_loop_v(d: &Data, r: &[f64]) -> Option<f64> {
+    let mut pts: Vec<(f64, f64, f64)> = Vec::new();
+    let min_len = ((HELD_LOOP_MIN_S / d.period_s()).ceil() as usize).max(4);
+    let mut i = 1;
+    while i < d.len() {
+        let start = i;
+        while i < d.len() && (d.u_v[i] - d.u_v[start]).abs() <= d.hold_band_v {
+            i += 1;
+        }
+        // `i` is now the next level's first sample (a run holds at least its first).
+        let step = d.u_v[start] - d.u_v[start - 1];
+        if i - start >= min_len && step.abs() > d.hold_band_v {
+            let half = start + (i - start) / 2;
+            pts.push((d.u_v[half], mean(&r[half..i]), step.signum()));
+        }
+    }
+    let ups = pts.iter().filter(|p| p.2 > 0.0).count();
+    if pts.len() < HELD_LOOP_MIN_HOLDS || ups < 2 || pts.len() - ups < 2 {
+        return None;
+    }
+    let x = DMatrix::from_fn(pts.len(), 4, |i, j| {
+        let (u, _, dir) = pts[i];
+        [1.0, u, u * u, dir][j]
+    });
+    let y = DVector::from_iterator(pts.len(), pts.iter().map(|p| p.1));
+    let beta = (x.transpose() * &x).cholesky()?.solve(&(x.transpose() * y));
+    beta[3].is_finite().then(|| 2.0 * beta[3].abs())
+}
 
 /// The signatures of the residuals `y - sims`.
 #[allow(clippy::needless_range_loop)] // several arrays indexed together
@@ -140,11 +185,19 @@ pub fn compute(data: &[Data], sims: &[Vec<f64>], noise: &[f64]) -> Signatures {
             slot.1 += 1;
             xs.push((d.u_v[i], r[i]));
         }
+        let mut moving_loop = false;
         for b in 0..bins {
             if up[b].1 >= 20 && down[b].1 >= 20 {
                 let gap = up[b].0 / up[b].1 as f64 - down[b].0 / down[b].1 as f64;
                 s.loop_v = s.loop_v.max(gap.abs());
+                moving_loop = true;
             }
+        }
+        // A record of steps alone (random levels) never moves slowly: its loop shows in the
+        // held levels instead, a level reached from below sitting apart from one reached
+        // from above.
+        if !moving_loop && let Some(gap) = held_loop_v(d, &r) {
+            s.held_loop_v = s.held_loop_v.max(gap);
         }
         if xs.len() >= 50 {
             s.curve_v = s.curve_v.max(curvature(&xs, lo, hi));
@@ -284,7 +337,15 @@ impl Signatures {
             "saturation" => self.u_span_v.0 <= lim_lo || self.u_span_v.1 >= lim_hi,
             // The table's reversible slopes can take any scale or curvature too: hysteresis is
             // named only where the residual shows a loop.
-            "hysteresis" => self.loop_v >= HYST_LOOP_MIN_NOISE * self.noise_v,
+            // Held levels that sit apart by the direction of the step into them are a loop
+            // only where the holds are flat: a creep that has not caught up after a step
+            // leaves the same pattern, with a tail (families 1073, 1087, 1096: creep on
+            // random levels took a false `hysteresis` from the held levels' gap alone).
+            "hysteresis" => {
+                self.loop_v >= HYST_LOOP_MIN_NOISE * self.noise_v
+                    || (self.held_loop_v >= HYST_LOOP_MIN_NOISE * self.noise_v
+                        && self.tail_v < DRIFT_TAIL_MIN_NOISE * self.noise_v)
+            }
             // Holds that show no tail show no creep (without holds the selection's give-way
             // rule asks the static shapes instead).
             "drift" => self.holds == 0 || self.tail_v >= DRIFT_TAIL_MIN_NOISE * self.noise_v,
@@ -326,6 +387,10 @@ impl Signatures {
                     .to_string()
             }
             "drift" => format!("tails after steps up to {} during holds", mv(self.tail_v)),
+            "hysteresis" if self.loop_v == 0.0 && self.held_loop_v > 0.0 => format!(
+                "held levels reached from below and from above differ by {} at equal input",
+                mv(self.held_loop_v)
+            ),
             "hysteresis" => format!(
                 "residual differs by up to {} between rising and falling input",
                 mv(self.loop_v)
@@ -348,5 +413,55 @@ impl Signatures {
             ),
             _ => String::new(),
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::io::csv::Record;
+
+    /// A record of steps at 1 kHz, each level held 50 ms, and a residual that is a static
+    /// quadratic of the input plus `g` times the direction of the step into the level.
+    fn steps(levels: &[f64], g: f64) -> (Data, Vec<f64>) {
+        let per = 50;
+        let n = per * levels.len();
+        let t: Vec<f64> = (0..n).map(|i| i as f64 * 1e-3).collect();
+        let u: Vec<f64> = (0..n).map(|i| levels[i / per]).collect();
+        let r: Vec<f64> = (0..n)
+            .map(|i| {
+                let k = i / per;
+                let dir = if k == 0 {
+                    0.0
+                } else {
+                    (levels[k] - levels[k - 1]).signum()
+                };
+                0.01 + 0.003 * u[i] - 0.002 * u[i] * u[i] + g * dir
+            })
+            .collect();
+        let d = Data::from_record(
+            "steps.csv",
+            Record::new(t, u.clone(), Some(u), None).unwrap(),
+        )
+        .unwrap();
+        (d, r)
+    }
+
+    /// The held levels' loop finds the direction's gap (2 g) beside a static quadratic, finds
+    /// none where the levels depend on the input alone, and declines with too few holds or
+    /// holds reached one way only. Tolerance: the fit is exact for these residuals, so 1e-9 V.
+    #[test]
+    fn held_levels_show_a_loop_of_steps_alone() {
+        let levels = [2.0, 5.0, 3.0, 7.0, 4.0, 8.0, 1.0, 6.0];
+        let (d, r) = steps(&levels, 0.02);
+        let gap = held_loop_v(&d, &r).unwrap();
+        assert!((gap - 0.04).abs() < 1e-9, "gap {gap}");
+        let (d, r) = steps(&levels, 0.0);
+        let gap = held_loop_v(&d, &r).unwrap();
+        assert!(gap < 1e-9, "gap {gap}");
+        let (d, r) = steps(&levels[..4], 0.02);
+        assert!(held_loop_v(&d, &r).is_none(), "three steps");
+        let (d, r) = steps(&[1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0], 0.02);
+        assert!(held_loop_v(&d, &r).is_none(), "rising only");
     }
 }
