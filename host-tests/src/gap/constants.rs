@@ -95,6 +95,11 @@ pub const HELD_LOOP_MIN_HOLDS: usize = 5;
 /// Shortest hold whose level counts towards that loop, seconds (our assumption: the thesis'
 /// plant settles in about 1 ms, and the hold's second half, from 10 ms on, is its level).
 pub const HELD_LOOP_MIN_S: f64 = 0.02;
+/// Share of the direction's power (each hold's +1 or -1) that the static quadratic must leave
+/// unexplained for the held levels' loop to be measured at all (our assumption: a quarter,
+/// the direction's residual at half its size; below, the levels' direction follows from their
+/// input and a loop cannot be told from a static shape).
+pub const HELD_LOOP_MIN_DIR_SHARE: f64 = 0.25;
 /// The residual's largest tail during a hold ([`super::signatures::Signatures::tail_v`]) that
 /// `drift` needs where the records hold their input, in noise floors (our assumption: a tail
 /// is the difference of two means of a tenth of a hold of 0.2 s or more, so noise alone moves

@@ -26,7 +26,7 @@
 //! Each is a number with a unit; [`Signatures::supports`] turns them into the gate the
 //! selection uses, [`Signatures::describe`] into words for the table.
 
-use super::constants::{HELD_LOOP_MIN_HOLDS, HELD_LOOP_MIN_S};
+use super::constants::{HELD_LOOP_MIN_DIR_SHARE, HELD_LOOP_MIN_HOLDS, HELD_LOOP_MIN_S};
 use super::{
     DRIFT_TAIL_MIN_NOISE, Data, HYST_LOOP_MIN_NOISE, LINE_RATIO_MIN, MAX_MODE_DAMPING,
     OFFSET_SHOWN_MIN, catalogue,
@@ -91,7 +91,9 @@ fn held_loop_v(d: &Data, r: &[f64]) -> Option<f64> {
         while i < d.len() && (d.u_v[i] - d.u_v[start]).abs() <= d.hold_band_v {
             i += 1;
         }
-        // `i` is now the next level's first sample (a run holds at least its first).
+        // `i` is now the next level's first sample (a run holds at least its first; the
+        // guard keeps the scan moving whatever the band).
+        i = i.max(start + 1);
         let step = d.u_v[start] - d.u_v[start - 1];
         if i - start >= min_len && step.abs() > d.hold_band_v {
             let half = start + (i - start) / 2;
@@ -102,13 +104,39 @@ fn held_loop_v(d: &Data, r: &[f64]) -> Option<f64> {
     if pts.len() < HELD_LOOP_MIN_HOLDS || ups < 2 || pts.len() - ups < 2 {
         return None;
     }
-    let x = DMatrix::from_fn(pts.len(), 4, |i, j| {
-        let (u, _, dir) = pts[i];
-        [1.0, u, u * u, dir][j]
+    // The direction's coefficient by its part the static quadratic does not explain (the
+    // quadratic in the standardised input, so that it is well conditioned): where a few
+    // levels are each reached one way only (a square wave, a 0-5-10-0 cycle), the direction
+    // is a function of the level, the loop cannot be told from a static shape, and there is
+    // no answer.
+    let n = pts.len() as f64;
+    let mu = pts.iter().map(|p| p.0).sum::<f64>() / n;
+    let sd = (pts.iter().map(|p| (p.0 - mu).powi(2)).sum::<f64>() / n).sqrt();
+    if sd.is_nan() || sd <= 0.0 {
+        return None;
+    }
+    let x = DMatrix::from_fn(pts.len(), 3, |i, j| {
+        let z = (pts[i].0 - mu) / sd;
+        [1.0, z, z * z][j]
     });
+    let dir = DVector::from_iterator(pts.len(), pts.iter().map(|p| p.2));
+    // Three distinct levels at least, or the quadratic is singular.
+    let mut zs: Vec<f64> = pts.iter().map(|p| (p.0 - mu) / sd).collect();
+    zs.sort_by(f64::total_cmp);
+    if 1 + zs.windows(2).filter(|w| w[1] - w[0] > 0.01).count() < 3 {
+        return None;
+    }
+    let c = (x.transpose() * &x)
+        .cholesky()?
+        .solve(&(x.transpose() * &dir));
+    let e = &dir - &x * c;
+    let ee = e.dot(&e);
+    if ee < HELD_LOOP_MIN_DIR_SHARE * n {
+        return None;
+    }
     let y = DVector::from_iterator(pts.len(), pts.iter().map(|p| p.1));
-    let beta = (x.transpose() * &x).cholesky()?.solve(&(x.transpose() * y));
-    beta[3].is_finite().then(|| 2.0 * beta[3].abs())
+    let g = e.dot(&y) / ee;
+    g.is_finite().then(|| 2.0 * g.abs())
 }
 
 /// The signatures of the residuals `y - sims`.
@@ -387,7 +415,7 @@ impl Signatures {
                     .to_string()
             }
             "drift" => format!("tails after steps up to {} during holds", mv(self.tail_v)),
-            "hysteresis" if self.loop_v == 0.0 && self.held_loop_v > 0.0 => format!(
+            "hysteresis" if self.held_loop_v > self.loop_v => format!(
                 "held levels reached from below and from above differ by {} at equal input",
                 mv(self.held_loop_v)
             ),
@@ -448,8 +476,9 @@ mod tests {
     }
 
     /// The held levels' loop finds the direction's gap (2 g) beside a static quadratic, finds
-    /// none where the levels depend on the input alone, and declines with too few holds or
-    /// holds reached one way only. Tolerance: the fit is exact for these residuals, so 1e-9 V.
+    /// none where the levels depend on the input alone, and declines with too few holds,
+    /// holds reached one way only, or levels whose direction follows from the level (a
+    /// square wave, a repeated 0-5-10-0 cycle). Tolerance: the fit is exact for these residuals, so 1e-9 V.
     #[test]
     fn held_levels_show_a_loop_of_steps_alone() {
         let levels = [2.0, 5.0, 3.0, 7.0, 4.0, 8.0, 1.0, 6.0];
@@ -463,5 +492,10 @@ mod tests {
         assert!(held_loop_v(&d, &r).is_none(), "three steps");
         let (d, r) = steps(&[1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0], 0.02);
         assert!(held_loop_v(&d, &r).is_none(), "rising only");
+        // Levels each reached one way only: the direction follows from the level.
+        let (d, r) = steps(&[2.3, 7.1, 2.3, 7.1, 2.3, 7.1, 2.3, 7.1], 0.0);
+        assert!(held_loop_v(&d, &r).is_none(), "square wave");
+        let (d, r) = steps(&[0.0, 5.0, 10.0, 0.0, 5.0, 10.0, 0.0, 5.0, 10.0], 0.0);
+        assert!(held_loop_v(&d, &r).is_none(), "0-5-10-0 cycle");
     }
 }

@@ -545,7 +545,7 @@ fn row_blocks(n: usize) -> impl Iterator<Item = std::ops::Range<usize>> {
 
 /// [`input_gram`] of regressors whose columns differ from `base`'s (Gram matrix `g_base`)
 /// only in the drift's lags: the lags' rows and columns computed again, the rest kept (a
-/// structural round with K(u) but no K'(u) on the hysteresis columns).
+/// structural round's K(u), its hysteresis columns under the same K'(u) as `base`'s).
 fn gram_new_lags(x: &SlowRegressors, g_base: &DMatrix<f64>) -> DMatrix<f64> {
     let active = active_cols(x.form);
     let lags: Vec<usize> = (0..N_TAU).collect();
@@ -626,7 +626,8 @@ pub(super) fn fit_slow(
             kdrift: None,
             ..shape
         };
-        let plain = if plain_shape.kprime == x.kprime && plain_shape.kdrift.is_none() {
+        // `x`, the step's regressors, has K = 1: with its K' it is the plain one itself.
+        let plain = if plain_shape.kprime == x.kprime {
             None
         } else {
             Some(slow_regressors_shaped(data, &plain_shape, x))
@@ -653,8 +654,9 @@ pub(super) fn fit_slow(
     Some(p)
 }
 
-/// K(u) of the drift and its knee given the present fit `p` (gains, time constants; `shape`'s
-/// K' on the play columns): for each knee of [`DRIFT_KNEES`], one weighted solve with the three
+/// K(u) of the drift and its knee given the present fit `p` (gains, time constants) on the
+/// regressors `x` with K = 1 and the round's K'(u) on their play columns (`shape` gives the
+/// inputs' span): for each knee of [`DRIFT_KNEES`], one weighted solve with the three
 /// lags of `u`, the lags of `c(u) u` for `c = x, x^2, x^3` (`x` the input held above the knee)
 /// weighted by the present gains (their coefficients are `k1..k3`), and the other slow effects'
 /// columns. The knees are ranked by an unconstrained solve (the fixed columns' block factored

@@ -203,9 +203,8 @@ pub fn search(
                 h.start_turns_v = (!c.is_empty()).then(|| c.clone());
             }
             let m2 = refit_slow(&m2, &[], data, &x2, u_range)?;
-            let sims: Vec<Vec<f64>> = data
-                .iter()
-                .map(|d| sim(&m2, d).ok())
+            let sims: Vec<Vec<f64>> = par_map(data, |d| sim(&m2, d).ok())
+                .into_iter()
                 .collect::<Option<_>>()?;
             let ms: Vec<f64> = data
                 .iter()
