@@ -206,6 +206,13 @@ impl Data {
     /// [`super::constants::HOLD_MIN_S`], as `start..end` sample ranges (where a drift shows
     /// as a tail and a hysteresis loop does not).
     pub fn holds(&self) -> Vec<std::ops::Range<usize>> {
+        self.holds_of(super::constants::HOLD_MIN_S)
+    }
+
+    /// The runs of constant input (within the record's hold band) from the second sample on
+    /// that last `min_s` seconds or more, as `start..end` sample ranges; a run after the first
+    /// starts at the sample where the input left the last one.
+    pub fn holds_of(&self, min_s: f64) -> Vec<std::ops::Range<usize>> {
         let (n, t) = (self.len(), self.period_s());
         let mut out = Vec::new();
         let mut i = 1;
@@ -214,10 +221,12 @@ impl Data {
             while i < n && (self.u_v[i] - self.u_v[start]).abs() <= self.hold_band_v {
                 i += 1;
             }
-            if (i - start) as f64 * t >= super::constants::HOLD_MIN_S {
+            // `i` is now the next run's first sample (a run holds at least its first; the
+            // guard keeps the scan moving whatever the band).
+            i = i.max(start + 1);
+            if (i - start) as f64 * t >= min_s {
                 out.push(start..i);
             }
-            i += 1;
         }
         out
     }

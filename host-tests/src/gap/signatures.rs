@@ -76,7 +76,7 @@ pub struct Signatures {
 pub const WELCH_SEGMENT: usize = 1024;
 
 /// The loop of a record's held levels (`None` with fewer than [`HELD_LOOP_MIN_HOLDS`] holds
-/// of [`HELD_LOOP_MIN_S`] or more after a step, or fewer than two reached each way): the
+/// of [`HELD_LOOP_MIN_S`] or more after a step ([`Data::holds_of`]), or fewer than two reached each way): the
 /// residual's mean over each hold's second half (settled), fitted by least squares to a
 /// static quadratic in the input plus `g` times the direction of the step into the hold (+1
 /// up, -1 down); the loop is `2 |g|`, the gap between levels reached from below and from
@@ -84,20 +84,11 @@ pub const WELCH_SEGMENT: usize = 1024;
 /// map, which do not depend on the direction.
 fn held_loop_v(d: &Data, r: &[f64]) -> Option<f64> {
     let mut pts: Vec<(f64, f64, f64)> = Vec::new();
-    let min_len = ((HELD_LOOP_MIN_S / d.period_s()).ceil() as usize).max(4);
-    let mut i = 1;
-    while i < d.len() {
-        let start = i;
-        while i < d.len() && (d.u_v[i] - d.u_v[start]).abs() <= d.hold_band_v {
-            i += 1;
-        }
-        // `i` is now the next level's first sample (a run holds at least its first; the
-        // guard keeps the scan moving whatever the band).
-        i = i.max(start + 1);
-        let step = d.u_v[start] - d.u_v[start - 1];
-        if i - start >= min_len && step.abs() > d.hold_band_v {
-            let half = start + (i - start) / 2;
-            pts.push((d.u_v[half], mean(&r[half..i]), step.signum()));
+    for h in d.holds_of(HELD_LOOP_MIN_S) {
+        let step = d.u_v[h.start] - d.u_v[h.start - 1];
+        if h.len() >= 4 && step.abs() > d.hold_band_v {
+            let half = h.start + h.len() / 2;
+            pts.push((d.u_v[half], mean(&r[half..h.end]), step.signum()));
         }
     }
     let ups = pts.iter().filter(|p| p.2 > 0.0).count();

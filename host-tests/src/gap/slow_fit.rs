@@ -910,7 +910,6 @@ fn fit_slow_linear(
         let w = 1.0 / rows.len().max(1) as f64;
         let e: Vec<f64> = rows.iter().map(|&i| d.y_v[i] - y0[r][i]).collect();
         let s: Vec<f64> = rows.iter().map(|&i| y0[r][i]).collect();
-        let dot = |a: &[f64], b: &[f64]| a.iter().zip(b).map(|(x, y)| x * y).sum::<f64>();
         for (k, c) in cols.iter().enumerate() {
             b[k] += w * dot(c, &e);
             let gs = w * dot(c, &s);
@@ -1563,12 +1562,10 @@ fn warm_set(beta: &[f64]) -> Vec<bool> {
 /// the regressors keep them).
 struct DriftProblem<'a> {
     data: &'a [Data],
-    /// The regressors the fixed columns are read from, and the model's output without slow
-    /// effects (the sensor gain's column).
+    /// The regressors the fixed columns and the lags' input (`K(u) u`) are read from, and
+    /// the model's output without slow effects (the sensor gain's column).
     x: &'a SlowRegressors,
     y0: &'a [Vec<f64>],
-    /// Per record: the lags' input (`K(u) u`).
-    drive: &'a [Vec<f64>],
     /// Per record: the drive's runs of equal values ([`drive_runs`]).
     runs: Vec<Vec<(usize, usize, usize)>>,
     /// Per record: (weight, settled sample indices, target at them, their positions among
@@ -1635,7 +1632,6 @@ impl<'a> DriftProblem<'a> {
             data,
             x,
             y0,
-            drive: &x.drive,
             runs: x.drive.iter().map(|d| drive_runs(d)).collect(),
             recs,
             fixed: fixed.to_vec(),
@@ -1655,8 +1651,12 @@ impl<'a> DriftProblem<'a> {
         let mut gll = [[0.0f64; 3]; 3];
         let mut gle = [0.0f64; 3];
         let mut glf = [vec![0.0f64; nf], vec![0.0f64; nf], vec![0.0f64; nf]];
-        for (r, ((d, drive), (w, idx, e, js))) in
-            self.data.iter().zip(self.drive).zip(&self.recs).enumerate()
+        for (r, ((d, drive), (w, idx, e, js))) in self
+            .data
+            .iter()
+            .zip(&self.x.drive)
+            .zip(&self.recs)
+            .enumerate()
         {
             let t = d.period_s();
             let a = taus.map(|tau| (-t / tau).exp());
@@ -1795,7 +1795,7 @@ impl<'a> DriftProblem<'a> {
         for (((d, drive), starts), ((w, idx, e, _), f)) in self
             .data
             .iter()
-            .zip(self.drive)
+            .zip(&self.x.drive)
             .zip(&self.runs)
             .zip(self.recs.iter().zip(free_cols))
         {
