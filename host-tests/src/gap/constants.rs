@@ -36,12 +36,13 @@ pub const STOP_FLOOR_RATIO: f64 = 1.15;
 pub const LINE_RATIO_MIN: f64 = 3.0;
 /// ... and only if its damping ratio is at most this (a line, not a lag; our assumption).
 pub const MAX_MODE_DAMPING: f64 = 0.25;
-/// The drift time constants' refinement stops when a pass of coordinate descent gains less
-/// than this much weighted residual power, V^2 (our assumption: 1e-4 of the power of 1 mV of
-/// noise; two passes, the earlier fixed count, left the demo at 2.5x its floor, eight reach
-/// 1.1x).
+/// The drift time constants' refinement stops when an iteration (a Newton step of the three,
+/// or a pass of coordinate descent where no such step gains) gains less than this much
+/// weighted residual power, V^2, or a Newton step would (our assumption: 1e-4 of the power of
+/// 1 mV of noise; two passes of coordinate descent, the earlier fixed count, left the demo at
+/// 2.5x its floor, eight reach 1.1x).
 pub const DRIFT_REFINE_TOL_V2: f64 = 1e-10;
-/// ... or after this many passes.
+/// ... or after this many iterations.
 pub const DRIFT_REFINE_PASSES: usize = 12;
 /// Rounds of the slow fit's structural refinement (K(u) of the drift with its knee, K'(u) on
 /// the play sum) for a model the workflow keeps (a step's refit, the final check), where a

@@ -1107,50 +1107,87 @@ fn fit_slow_linear(
                 f64::NEG_INFINITY
             }
         };
-        // Coordinate descent: the valley is narrow (a shorter first lag and a play operator
-        // of small threshold trade against each other), so it runs until a pass gains less
-        // than DRIFT_REFINE_TOL_V2 of weighted residual power (at most DRIFT_REFINE_PASSES).
-        // A warm start (the previous round's time constants) replaces the grid's best when it
-        // explains more.
-        let mut cur_val = eval(&taus);
+        // The valley is narrow (a shorter first lag and a play operator of small threshold
+        // trade against each other): coordinate descent zig-zags down it (it used all of
+        // DRIFT_REFINE_PASSES on the demo's fits, 500-560 evaluations each). So after one wide
+        // coordinate pass (a fit from nothing: the grid's best may sit a grid step off), a
+        // damped Newton step in log tau ([`newton_step`]) moves the three together; where it
+        // cannot (a difference point outside the bounds or past a gain of 1, no damping that
+        // gains), a narrow coordinate pass does. It stops when an iteration gains less than
+        // DRIFT_REFINE_TOL_V2 of weighted residual power.
         let tau_hi = (grid[N_TAU - 1] * 2.0).min(tau_max.max(grid[n_tau - 1]));
-        for pass in 0..DRIFT_REFINE_PASSES {
-            let last = cur_val;
-            // The first pass searches a factor 3 either side, later ones 1.25 with fewer
-            // golden steps (the same final resolution, about 0.1 % of tau).
-            // (a refit from earlier time constants starts with the narrow search)
-            let (factor, iters) = if pass == 0 && start.is_none() {
-                (3.0, 18)
+        let bounds = |m: usize, taus: &[f64; 3]| -> (f64, f64) {
+            let lo = if m > 0 {
+                taus[m - 1] * TAU_SEPARATION
             } else {
-                (1.25, 12)
+                grid[0] * 0.5
             };
-            for m in 0..3 {
-                let lo = if m > 0 {
-                    taus[m - 1] * 1.05
-                } else {
-                    grid[0] * 0.5
-                };
-                let hi = if m < 2 { taus[m + 1] / 1.05 } else { tau_hi };
-                // Also skips NaN bounds.
-                if lo.partial_cmp(&hi) != Some(std::cmp::Ordering::Less) {
-                    continue;
-                }
-                let a = lo.max(taus[m] / factor).ln();
-                let b = hi.min(taus[m] * factor).ln();
-                if a.partial_cmp(&b) != Some(std::cmp::Ordering::Less) {
-                    continue;
-                }
-                let cur = taus;
-                let lt = golden_n(a, b, a, b, iters, |lt| {
+            let hi = if m < 2 {
+                taus[m + 1] / TAU_SEPARATION
+            } else {
+                tau_hi
+            };
+            (lo, hi)
+        };
+        let inside = |taus: &[f64; 3]| {
+            (0..3).all(|m| {
+                let (lo, hi) = bounds(m, taus);
+                taus[m] >= lo && taus[m] <= hi
+            })
+        };
+        let coordinate_pass =
+            |taus: &mut [f64; 3], cur_val: &mut f64, factor: f64, iters: usize| {
+                for m in 0..3 {
+                    let (lo, hi) = bounds(m, taus);
+                    // Also skips NaN bounds.
+                    if lo.partial_cmp(&hi) != Some(std::cmp::Ordering::Less) {
+                        continue;
+                    }
+                    let a = lo.max(taus[m] / factor).ln();
+                    let b = hi.min(taus[m] * factor).ln();
+                    if a.partial_cmp(&b) != Some(std::cmp::Ordering::Less) {
+                        continue;
+                    }
+                    let cur = *taus;
+                    let lt = golden_n(a, b, a, b, iters, |lt| {
+                        let mut t = cur;
+                        t[m] = lt.exp();
+                        -eval(&t)
+                    });
                     let mut t = cur;
                     t[m] = lt.exp();
-                    -eval(&t)
-                });
-                let mut t = cur;
-                t[m] = lt.exp();
-                let v = eval(&t);
-                if v > cur_val {
-                    (taus, cur_val) = (t, v);
+                    let v = eval(&t);
+                    if v > *cur_val {
+                        (*taus, *cur_val) = (t, v);
+                    }
+                }
+            };
+        let mut cur_val = eval(&taus);
+        // The wide pass searches a factor 3 either side to about 5 % of tau (the Newton
+        // steps do the rest), the narrow ones 1.25 to about 0.1 %; a refit from earlier time
+        // constants (the structural round) has no wide pass.
+        if start.is_none() {
+            coordinate_pass(&mut taus, &mut cur_val, 3.0, 8);
+        }
+        let at_log = |lt: [f64; 3]| -> f64 {
+            let t = lt.map(f64::exp);
+            if inside(&t) {
+                eval(&t)
+            } else {
+                f64::NEG_INFINITY
+            }
+        };
+        // The log time constants kept beside `taus`, so that the parts of a Newton step's
+        // points are found again by the next (`exp(ln(tau))` need not give `tau` back).
+        let mut lt = taus.map(f64::ln);
+        for _ in 0..DRIFT_REFINE_PASSES {
+            let last = cur_val;
+            match newton_step(&at_log, lt, cur_val) {
+                Newton::Moved(l, v) => (lt, taus, cur_val) = (l, l.map(f64::exp), v),
+                Newton::Converged => break,
+                Newton::Stuck => {
+                    coordinate_pass(&mut taus, &mut cur_val, 1.25, 12);
+                    lt = taus.map(f64::ln);
                 }
             }
             if cur_val - last < DRIFT_REFINE_TOL_V2 {
@@ -1841,6 +1878,113 @@ impl<'a> DriftProblem<'a> {
     }
 }
 
+/// Minimum ratio between neighbouring drift time constants in the refinement (our
+/// assumption: two lags closer than 5 % are one lag with its gain split).
+const TAU_SEPARATION: f64 = 1.05;
+
+/// The finite-difference step of [`newton_step`], in log tau (our assumption: 1 % of tau,
+/// ten times the coordinate search's resolution; the difference formulas' error, of order
+/// the step squared, moves the optimum by about 1e-4 of tau).
+const NEWTON_STEP_LN: f64 = 0.01;
+
+/// The Levenberg damping factors [`newton_step`] tries in turn, in units of the Hessian's
+/// diagonal (our assumption: a plain Newton step first, then ever shorter ones towards the
+/// gradient, four decades).
+const NEWTON_DAMPING: [f64; 6] = [0.0, 0.01, 0.1, 1.0, 10.0, 100.0];
+
+/// The longest Newton step, in log tau (our assumption: a factor e, the span the wide
+/// coordinate pass searches).
+const NEWTON_MAX_LN: f64 = 1.0;
+
+/// One damped Newton step that raises `f` (a function of three log time constants,
+/// `-inf` outside its domain) from `x` where it is `fx`: the gradient and Hessian by central
+/// and forward differences of step [`NEWTON_STEP_LN`] (up to ten evaluations, which a caller
+/// that keeps each coordinate's part shares: a move of one coordinate reuses the other two),
+/// then `(-H + lambda diag|H|) d = g` for each damping of [`NEWTON_DAMPING`] until a step (at
+/// most [`NEWTON_MAX_LN`] long) raises `f`. A coordinate whose difference points leave the
+/// domain (a time constant at its bound, a gain at 1) is held where it is and the step taken
+/// in the others. [`Newton::Converged`] where every coordinate is free and the plain Newton
+/// step would gain less than [`DRIFT_REFINE_TOL_V2`]; [`Newton::Stuck`] where no coordinate
+/// is free or no damping gains: the caller falls back to a coordinate search.
+fn newton_step(f: &impl Fn([f64; 3]) -> f64, x: [f64; 3], fx: f64) -> Newton {
+    let h = NEWTON_STEP_LN;
+    let moved = |d: [f64; 3]| f([x[0] + d[0], x[1] + d[1], x[2] + d[2]]);
+    let unit = |k: usize, s: f64| {
+        let mut d = [0.0; 3];
+        d[k] = s;
+        d
+    };
+    if !fx.is_finite() {
+        return Newton::Stuck;
+    }
+    let fp = [0, 1, 2].map(|k| moved(unit(k, h)));
+    let fm = [0, 1, 2].map(|k| moved(unit(k, -h)));
+    let free: Vec<usize> = (0..3)
+        .filter(|&k| fp[k].is_finite() && fm[k].is_finite())
+        .collect();
+    let n = free.len();
+    if n == 0 {
+        return Newton::Stuck;
+    }
+    let g = DVector::from_fn(n, |i, _| (fp[free[i]] - fm[free[i]]) / (2.0 * h));
+    let mut hess = DMatrix::<f64>::zeros(n, n);
+    for i in 0..n {
+        let k = free[i];
+        hess[(i, i)] = (fp[k] - 2.0 * fx + fm[k]) / (h * h);
+        for j in 0..i {
+            let l = free[j];
+            let mut d = unit(k, h);
+            d[l] = h;
+            let v = moved(d);
+            if !v.is_finite() {
+                return Newton::Stuck;
+            }
+            let c = (v - fp[k] - fp[l] + fx) / (h * h);
+            hess[(i, j)] = c;
+            hess[(j, i)] = c;
+        }
+    }
+    for lambda in NEWTON_DAMPING {
+        let mut a = -hess.clone();
+        for i in 0..n {
+            a[(i, i)] += lambda * hess[(i, i)].abs().max(1e-300);
+        }
+        let Some(ch) = a.cholesky() else {
+            continue;
+        };
+        let d = ch.solve(&g);
+        // The quadratic model's gain of the plain step, `g.d / 2`.
+        if lambda == 0.0 && n == 3 && 0.5 * g.dot(&d) < DRIFT_REFINE_TOL_V2 {
+            return Newton::Converged;
+        }
+        let len = d.amax();
+        if !len.is_finite() || len == 0.0 {
+            continue;
+        }
+        let s = (NEWTON_MAX_LN / len).min(1.0);
+        let mut step = [0.0; 3];
+        for (i, &k) in free.iter().enumerate() {
+            step[k] = s * d[i];
+        }
+        let v = moved(step);
+        if v > fx {
+            return Newton::Moved([x[0] + step[0], x[1] + step[1], x[2] + step[2]], v);
+        }
+    }
+    Newton::Stuck
+}
+
+/// What a [`newton_step`] did.
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Newton {
+    /// Moved to these log time constants, where the function is this.
+    Moved([f64; 3], f64),
+    /// Nothing left to gain.
+    Converged,
+    /// No step gains: search coordinate by coordinate instead.
+    Stuck,
+}
+
 /// The runs of equal values of `drive`: (first sample, end of the run, and for a run of one
 /// sample the end of the stretch of such runs it begins).
 fn drive_runs(drive: &[f64]) -> Vec<(usize, usize, usize)> {
@@ -1927,7 +2071,7 @@ struct SchurSearch {
 
 /// Lag parts a [`SchurSearch`] keeps: a coordinate step reuses the two time constants it
 /// does not move, so a few suffice.
-const SCHUR_PARTS_KEPT: usize = 8;
+const SCHUR_PARTS_KEPT: usize = 16;
 
 impl SchurSearch {
     /// The part of the lag of time constant `tau` on `problem` (kept or computed).
@@ -1948,6 +2092,61 @@ impl SchurSearch {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The damped Newton step ([`newton_step`]) on a narrow valley (curvatures 1 and 400
+    /// across it, where coordinate descent crawls): from a point off the valley it reaches
+    /// the optimum in a few steps and then says so; a coordinate whose difference points
+    /// leave the domain is held and the others still move. Tolerance 1e-4 in log tau: the
+    /// difference step's error (its square times the third derivative, zero on a quadratic)
+    /// plus the stopping rule's gain of 1e-10.
+    #[test]
+    fn newton_steps_follow_a_narrow_valley_and_respect_the_domain() {
+        let opt = [-3.0, 0.5, 2.5];
+        let f = |x: [f64; 3]| {
+            let (a, b, c) = (x[0] - opt[0], x[1] - opt[1], x[2] - opt[2]);
+            -(200.0 * (a - b) * (a - b) + 0.5 * (a + b) * (a + b) + 3.0 * c * c + 0.1 * a * c)
+        };
+        let mut x = [-2.0, -0.2, 3.1];
+        let mut fx = f(x);
+        let mut steps = 0;
+        loop {
+            match newton_step(&f, x, fx) {
+                Newton::Moved(y, v) => {
+                    assert!(v > fx);
+                    (x, fx) = (y, v);
+                    steps += 1;
+                    assert!(steps <= 5, "still moving after {steps} steps: {x:?}");
+                }
+                Newton::Converged => break,
+                Newton::Stuck => panic!("stuck at {x:?}"),
+            }
+        }
+        for k in 0..3 {
+            assert!((x[k] - opt[k]).abs() < 1e-4, "{x:?} against {opt:?}");
+        }
+        // The first coordinate may not go below -2.005: its lower difference point is outside,
+        // so it stays at -2.0 while the others move towards their optimum given it.
+        let g = |x: [f64; 3]| {
+            if x[0] < -2.005 {
+                f64::NEG_INFINITY
+            } else {
+                f(x)
+            }
+        };
+        let start = [-2.0, 0.5, 2.0];
+        match newton_step(&g, start, g(start)) {
+            Newton::Moved(y, v) => {
+                assert_eq!(y[0], -2.0);
+                assert!(v > g(start));
+                // Given a = 1, the second coordinate's optimum is b = 0.5 + 399 / 401.
+                assert!((y[1] - (0.5 + 399.0 / 401.0)).abs() < 1e-6, "{y:?}");
+            }
+            other => panic!("{other:?}"),
+        }
+        // Nothing free: the caller must search otherwise.
+        let h = |x: [f64; 3]| if x == start { g(x) } else { f64::NEG_INFINITY };
+        assert_eq!(newton_step(&h, start, h(start)), Newton::Stuck);
+    }
 
     /// The lag by runs and pairs ([`lag_at_rows`]) equals the plain one-sample recursion, on
     /// drives that mix holds, single-sample changes and runs of two, at rows anywhere
