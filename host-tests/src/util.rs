@@ -45,6 +45,24 @@ pub fn par_map<T: Sync, R: Send>(items: &[T], f: impl Fn(&T) -> R + Sync) -> Vec
     out.into_iter().flatten().collect()
 }
 
+/// [`par_map`] with the items started costliest first (`cost`, larger first; ties keep their
+/// order), the results in the items' order: with a few jobs of unequal size on two cores, the
+/// longest started last would keep one core busy while the other waits.
+pub fn par_map_costliest_first<T: Sync, R: Send, K: Ord>(
+    items: &[T],
+    cost: impl Fn(&T) -> K,
+    f: impl Fn(&T) -> R + Sync,
+) -> Vec<R> {
+    let mut order: Vec<usize> = (0..items.len()).collect();
+    order.sort_by_key(|&i| std::cmp::Reverse(cost(&items[i])));
+    let done = par_map(&order, |&i| f(&items[i]));
+    let mut out: Vec<Option<R>> = (0..items.len()).map(|_| None).collect();
+    for (i, r) in order.into_iter().zip(done) {
+        out[i] = Some(r);
+    }
+    out.into_iter().flatten().collect()
+}
+
 /// The median (reorders `v`); 0 for an empty slice. For an even length, the upper of the two
 /// middle values.
 pub fn median(v: &mut [f64]) -> f64 {

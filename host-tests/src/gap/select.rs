@@ -18,7 +18,7 @@ use super::slow_fit::{SlowRegressors, fit_slow, slow_regressors, solve_rows};
 use super::start;
 use super::unexplained::{Unexplained, locate};
 use crate::io::model_file::ModelFile;
-use crate::util::par_map;
+use crate::util::{par_map, par_map_costliest_first};
 use anyhow::{Context, ensure};
 
 /// One step of the workflow: the effect added or refitted.
@@ -556,20 +556,31 @@ pub fn diagnose(base: &ModelFile, data: &[Data], opts: &Options) -> anyhow::Resu
         if pair.iter().all(|p| named.iter().any(|n| n == p)) {
             units.push(pair.iter().map(|p| p.to_string()).collect());
         }
-        let trials = par_map(&units, |unit| -> Option<Trial> {
-            let mut m = model.clone();
-            for e in unit {
-                m = catalogue::revert(&m, base, e);
-            }
-            let m = refit_slow(&m, &[], data, &slow_x, u_range)?;
-            let s: Vec<Vec<f64>> = data
+        let left_slow = |unit: &Vec<String>| -> Vec<&str> {
+            named
                 .iter()
-                .map(|d| sim(&m, d))
-                .collect::<anyhow::Result<_>>()
-                .ok()?;
-            let ms = data.iter().zip(&s).map(|(d, y)| mse(&d.y_v, y)).collect();
-            Some((unit.clone(), m, s, ms))
-        });
+                .filter(|n| SLOW.contains(&n.as_str()) && !unit.contains(n))
+                .map(String::as_str)
+                .collect()
+        };
+        let trials = par_map_costliest_first(
+            &units,
+            |u| slow_cost(&left_slow(u)),
+            |unit| -> Option<Trial> {
+                let mut m = model.clone();
+                for e in unit {
+                    m = catalogue::revert(&m, base, e);
+                }
+                let m = refit_slow(&m, &[], data, &slow_x, u_range)?;
+                let s: Vec<Vec<f64>> = data
+                    .iter()
+                    .map(|d| sim(&m, d))
+                    .collect::<anyhow::Result<_>>()
+                    .ok()?;
+                let ms = data.iter().zip(&s).map(|(d, y)| mse(&d.y_v, y)).collect();
+                Some((unit.clone(), m, s, ms))
+            },
+        );
         // The largest growth over the records of the residual power above the floor.
         let growth = |ms: &[f64]| {
             (0..ms.len())
@@ -707,9 +718,16 @@ pub fn diagnose(base: &ModelFile, data: &[Data], opts: &Options) -> anyhow::Resu
                 swaps.push((e.clone(), f.to_string()));
             }
         }
-        let trials = par_map(
+        let trials = par_map_costliest_first(
             &swaps,
-            |(e, f)| -> Option<(ModelFile, Vec<Vec<f64>>, Vec<f64>)> {
+            |(e, f)| {
+                let set: Vec<&str> = named_slow
+                    .iter()
+                    .map(|n| if n == e { f.as_str() } else { n.as_str() })
+                    .collect();
+                slow_cost(&set)
+            },
+            |(e, f)| -> Option<Fitted> {
                 let m = catalogue::revert(&model, base, e);
                 let m = refit_slow(&m, &[f.as_str()], data, &slow_x, u_range)?;
                 let s: Vec<Vec<f64>> = data
@@ -969,6 +987,17 @@ pub(super) fn refit_slow(
     catalogue::with_slow(m, &p, u_range)
 }
 
+/// A fitted candidate model, its simulations of the records and their mean squares.
+type Fitted = (ModelFile, Vec<Vec<f64>>, Vec<f64>);
+
+/// A rank of the cost of a slow fit of `set` (for ordering parallel jobs): the drift's
+/// search and the hysteresis basis dominate, then the number of effects.
+fn slow_cost(set: &[&str]) -> usize {
+    4 * usize::from(set.contains(&"drift"))
+        + 4 * usize::from(set.contains(&"hysteresis"))
+        + set.len()
+}
+
 /// Fit every candidate and simulate it on every record.
 fn candidates(
     model: &ModelFile,
@@ -985,11 +1014,21 @@ fn candidates(
         .copied()
         .filter(|e| catalogue::present(model, e))
         .collect();
+    // The model without slow effects on every record (the slow fits' base), simulated in the
+    // pool below as its first job (the slow records' simulation is a core's work for a while).
     let base0 = catalogue::without_slow(model);
-    let y0: Vec<Vec<f64>> = par_map(data, |d| sim(&base0, d))
-        .into_iter()
-        .collect::<anyhow::Result<_>>()?;
-    let mut jobs: Vec<(String, bool, ModelFile)> = Vec::new();
+    let y0_cell: std::sync::OnceLock<Result<Vec<Vec<f64>>, String>> = std::sync::OnceLock::new();
+    let y0 = || -> anyhow::Result<&Vec<Vec<f64>>> {
+        y0_cell
+            .get_or_init(|| {
+                data.iter()
+                    .map(|d| sim(&base0, d))
+                    .collect::<anyhow::Result<_>>()
+                    .map_err(|e| format!("{e:#}"))
+            })
+            .as_ref()
+            .map_err(|e| anyhow::anyhow!("{e}"))
+    };
     let mut sets: Vec<(String, bool, Vec<&str>)> = SLOW
         .iter()
         .filter(|e| !present_slow.contains(e))
@@ -1010,16 +1049,6 @@ fn candidates(
             distinct.push(set.clone());
         }
     }
-    let fitted: Vec<Option<ModelFile>> = par_map(&distinct, |set| {
-        fit_slow(data, &y0, slow_x, set, u_range, CANDIDATE_ROUNDS)
-            .and_then(|p| catalogue::with_slow(model, &p, u_range))
-    });
-    for (effect, refit, set) in sets {
-        let k = distinct.iter().position(|d| *d == set);
-        if let Some(m) = k.and_then(|k| fitted[k].clone()) {
-            jobs.push((effect, refit, m));
-        }
-    }
     // Fast effects: bounded search on the fast records.
     let fast_idx: Vec<usize> = {
         let f: Vec<usize> = (0..data.len()).filter(|&i| data[i].is_fast()).collect();
@@ -1029,14 +1058,18 @@ fn candidates(
             f
         }
     };
-    let fast_fits: Vec<Option<(String, bool, ModelFile, f64)>> = par_map(&FAST, |e| {
-        let refit = catalogue::present(model, e);
+    let cur_fast_cost: f64 = fast_idx
+        .iter()
+        .map(|&i| data[i].len() as f64 * cur_mse[i].max(1e-14).ln())
+        .sum();
+    let n_fast: f64 = fast_idx.iter().map(|&i| data[i].len() as f64).sum();
+    let fast_fit = |e: &str| -> Option<ModelFile> {
         // Coordinate descent: the candidate, then the fast effects already named, then the
         // candidate again (fast effects compensate each other: a slew limit mimics a delay).
         let (mut m, mut cost) = fit_fast(model, data, &fast_idx, e, peak_hz)?;
         let others: Vec<&String> = named
             .iter()
-            .filter(|n| n.as_str() != *e && FAST.contains(&n.as_str()))
+            .filter(|n| n.as_str() != e && FAST.contains(&n.as_str()))
             .collect();
         for _pass in 0..4 {
             if others.is_empty() {
@@ -1056,45 +1089,85 @@ fn candidates(
                 (m, cost) = (m2, c2);
             }
             // Costs are sums of n ln MSE: stop when a pass gains less than 2 % of MSE.
-            let n_fast: f64 = fast_idx.iter().map(|&i| data[i].len() as f64).sum();
             if start - cost < n_fast * 0.02 {
                 break;
             }
         }
-        Some((e.to_string(), refit, m, cost))
-    });
-    let cur_fast_cost: f64 = fast_idx
-        .iter()
-        .map(|&i| data[i].len() as f64 * cur_mse[i].max(1e-14).ln())
-        .sum();
-    for (effect, refit, m, cost) in fast_fits.into_iter().flatten() {
-        // Simulate in full only what helps on the fast records (10 % of their MSE at least).
-        let n_fast: f64 = fast_idx.iter().map(|&i| data[i].len() as f64).sum();
-        if cost < cur_fast_cost + n_fast * (0.9f64).ln() {
-            jobs.push((effect, refit, m));
-        }
+        // Simulated in full only if it helps on the fast records (10 % of their MSE at least).
+        (cost < cur_fast_cost + n_fast * (0.9f64).ln()).then_some(m)
+    };
+    // Every slow set's joint solve and every fast effect's search, each with its simulation of
+    // every record, in one pool, so that no core waits at a barrier between a phase of fits and
+    // one of simulations: the slow fits' base first and a fast search beside it (the slow fits
+    // need the base), then the slow sets costliest first (those with the drift's search and
+    // the hysteresis basis, then the larger ones), then the other fast searches.
+    enum Task<'a> {
+        Base,
+        Slow(Vec<&'a str>),
+        Fast(&'static str),
     }
-    let results = par_map(&jobs, |(effect, refit, m)| -> anyhow::Result<Candidate> {
+    let mut slow_tasks: Vec<Task> = distinct.iter().cloned().map(Task::Slow).collect();
+    slow_tasks.sort_by_key(|t| match t {
+        Task::Slow(set) => std::cmp::Reverse(slow_cost(set)),
+        _ => std::cmp::Reverse(0),
+    });
+    let mut tasks: Vec<Task> = vec![Task::Base];
+    tasks.extend(FAST.iter().take(1).map(|e| Task::Fast(e)));
+    tasks.extend(slow_tasks);
+    tasks.extend(FAST.iter().skip(1).map(|e| Task::Fast(e)));
+    let simulated = |m: ModelFile| -> anyhow::Result<Fitted> {
         let sims: Vec<Vec<f64>> = data
             .iter()
-            .map(|d| sim(m, d))
+            .map(|d| sim(&m, d))
             .collect::<anyhow::Result<_>>()?;
         let mse_v = data
             .iter()
             .zip(&sims)
             .map(|(d, s)| mse(&d.y_v, s))
             .collect();
-        let k = catalogue::param_count(effect);
-        Ok(Candidate {
-            effect: effect.clone(),
-            refit: *refit,
-            model: m.clone(),
-            k,
-            sims,
-            mse: mse_v,
-        })
+        Ok((m, sims, mse_v))
+    };
+    let done: Vec<anyhow::Result<Option<Fitted>>> = par_map(&tasks, |t| {
+        let m = match t {
+            Task::Base => return y0().map(|_| None),
+            Task::Slow(set) => fit_slow(data, y0()?, slow_x, set, u_range, CANDIDATE_ROUNDS)
+                .and_then(|p| catalogue::with_slow(model, &p, u_range)),
+            Task::Fast(e) => fast_fit(e),
+        };
+        m.map(simulated).transpose()
     });
-    results.into_iter().collect()
+    let mut slow_done: Vec<(Vec<&str>, Fitted)> = Vec::new();
+    let mut fast_done: Vec<(&str, Fitted)> = Vec::new();
+    for (t, r) in tasks.iter().zip(done) {
+        if let Some(x) = r? {
+            match t {
+                Task::Base => {}
+                Task::Slow(set) => slow_done.push((set.clone(), x)),
+                Task::Fast(e) => fast_done.push((e, x)),
+            }
+        }
+    }
+    let candidate = |effect: &str, refit: bool, (m, sims, mse_v): &Fitted| Candidate {
+        effect: effect.to_string(),
+        refit,
+        model: m.clone(),
+        k: catalogue::param_count(effect),
+        sims: sims.clone(),
+        mse: mse_v.clone(),
+    };
+    // In the order the candidates always had: the slow effects' sets, then the fast effects.
+    let mut results = Vec::new();
+    for (effect, refit, set) in &sets {
+        if let Some((_, x)) = slow_done.iter().find(|(s, _)| s == set) {
+            results.push(candidate(effect, *refit, x));
+        }
+    }
+    for e in FAST {
+        if let Some((_, x)) = fast_done.iter().find(|(f, _)| *f == e) {
+            results.push(candidate(e, catalogue::present(model, e), x));
+        }
+    }
+    Ok(results)
 }
 
 #[cfg(test)]

@@ -7,10 +7,12 @@
 //! The start memory is a short list of turning points ([`super::everett::start_candidates`]:
 //! none, came down from above, came down from the top and back up, a decaying oscillation).
 //! Once `hysteresis` is fitted, each candidate is tried on the fitted model where it matters:
-//! each record is simulated only up to the sample where the candidate's memory and the present
-//! one agree again (the input has wiped the difference out; plus [`START_SETTLE_S`] for the
-//! plant to forget it), and the candidate that lowers the residual power there the most is
-//! taken; on a single record the best [`START_REFITTED`] are taken, each with its excursions
+//! each record is simulated only up to the sample from which the table's outputs from the
+//! candidate's memory and from the present one differ by a constant (none where the input has
+//! wiped the difference out; plus [`START_SETTLE_S`] for the plant to forget it), at most
+//! [`START_HEAD_MAX_S`] (beyond, the residual's change is the table's difference times the
+//! stage's response to it fitted over the head), and the candidate that lowers the residual
+//! power the most is taken; on a single record the best [`START_REFITTED`] are taken, each with its excursions
 //! from the first input scaled to the depth that lowers it most ([`START_SCALE`]: the
 //! candidates are a coarse grid). The hysteresis basis is then recomputed from that memory
 //! and the slow effects refitted with it (on a single record for each of them, the one that
@@ -37,6 +39,12 @@ use model_core::hysteresis::{HysteresisMemory, HysteresisTable};
 /// without simulating the whole record for each candidate).
 pub const START_SETTLE_S: f64 = 0.05;
 
+/// Longest head simulated for a candidate start, seconds (our assumption: beyond, the
+/// residual's change is ranked by the table's own difference; the identification protocol's
+/// 150 s record first reaches its top at 89 s, and its heads simulated in full took 1.3 s of a
+/// diagnosis' 15 s).
+pub const START_HEAD_MAX_S: f64 = 10.0;
+
 /// Rounds of start search and refit.
 const START_ROUNDS: usize = 2;
 
@@ -61,24 +69,32 @@ pub struct StartFit {
     pub mse: Vec<f64>,
 }
 
-/// First sample of `u_v` from which a table driven from memory `a` and from memory `b` agree
-/// (same turning points): the record's length if they never do.
-fn agree_from(
+/// The difference of a table's outputs driven from memory `a` and from memory `b`, as a
+/// simulation's output at each sample sees it (element `i`: after the inputs before sample
+/// `i`; one more element, after the last input), zero where it is under 1 uV; and the first
+/// sample from which it no longer changes (by 1 uV).
+fn table_difference(
     t: &HysteresisTable,
     u_v: &[f64],
     mut a: HysteresisMemory,
     mut b: HysteresisMemory,
-) -> usize {
-    for (i, &u) in u_v.iter().enumerate() {
-        if a.turning_points_v().eq(b.turning_points_v())
-            && (a.output_v() - b.output_v()).abs() < 1e-6
-        {
-            return i;
-        }
-        t.forward(&mut a, u as f32);
-        t.forward(&mut b, u as f32);
+) -> (Vec<f64>, usize) {
+    let mut diff = Vec::with_capacity(u_v.len() + 1);
+    diff.push((a.output_v() - b.output_v()) as f64);
+    for &u in u_v {
+        diff.push((t.forward(&mut a, u as f32) - t.forward(&mut b, u as f32)) as f64);
     }
-    u_v.len()
+    for v in diff.iter_mut() {
+        if v.abs() < 1e-6 {
+            *v = 0.0;
+        }
+    }
+    let last = diff[u_v.len()];
+    let from = diff
+        .iter()
+        .rposition(|v| (v - last).abs() > 1e-6)
+        .map_or(0, |i| (i + 1).min(u_v.len()));
+    (diff, from)
 }
 
 /// The first `k` samples of `d`.
@@ -131,20 +147,40 @@ pub fn search(
                 a.reset_after(&table, &hist, d.u_v[0] as f32);
                 let mut b = HysteresisMemory::new();
                 b.reset_after(&table, &now, d.u_v[0] as f32);
-                let k = agree_from(&table, &d.u_v, a, b);
-                let k = (k + (START_SETTLE_S / d.period_s()).ceil() as usize).min(d.len());
+                let settle = (START_SETTLE_S / d.period_s()).ceil() as usize;
+                // The table's outputs from the two memories differ until the input wipes the
+                // difference out, or for good (relays the record never switches, such as
+                // those above its largest input that one memory holds on): the head ends
+                // where the difference stops changing, or after START_HEAD_MAX_S. Beyond, the
+                // residual's change is the table's difference times the stage's response to
+                // it (fitted over the head): the ranking only, the start kept is refitted and
+                // simulated in full.
+                let (diff, fixed_from) = table_difference(&table, &d.u_v, a, b);
+                let cap = (START_HEAD_MAX_S / d.period_s()).ceil() as usize;
+                let k = (fixed_from.min(cap) + settle).min(d.len());
                 if k == 0 {
                     continue;
                 }
                 let h = head(d, k);
                 let y = sim(&m, &h).ok()?;
-                let e_new: f64 = h.y_v.iter().zip(&y).map(|(a, b)| (a - b).powi(2)).sum();
-                let e_now: f64 = h
+                let mut e_new: f64 = h.y_v.iter().zip(&y).map(|(a, b)| (a - b).powi(2)).sum();
+                let mut e_now: f64 = h
                     .y_v
                     .iter()
                     .zip(&s_now[..k])
                     .map(|(a, b)| (a - b).powi(2))
                     .sum();
+                if diff[k..d.len()].iter().any(|v| *v != 0.0) {
+                    let (num, den) = (0..k).fold((0.0, 0.0), |(n, q), i| {
+                        (n + (y[i] - s_now[i]) * diff[i], q + diff[i] * diff[i])
+                    });
+                    let scale = if den > 0.0 { num / den } else { 1.0 };
+                    for i in k..d.len() {
+                        let r = d.y_v[i] - s_now[i];
+                        e_new += (r - scale * diff[i]).powi(2);
+                        e_now += r * r;
+                    }
+                }
                 // Records weigh by their own residual power, as the selection's score does.
                 delta += (e_new - e_now) / (d.len() as f64 * ms_now[r].max(1e-14));
             }
