@@ -339,6 +339,20 @@ pub fn sim(model: &ModelFile, d: &Data) -> anyhow::Result<Vec<f64>> {
     Ok(y)
 }
 
+/// [`sim`] of `model` on every record, and each record's mean square residual.
+pub fn simulate_all(model: &ModelFile, data: &[Data]) -> anyhow::Result<(Vec<Vec<f64>>, Vec<f64>)> {
+    let sims: Vec<Vec<f64>> = data
+        .iter()
+        .map(|d| sim(model, d))
+        .collect::<anyhow::Result<_>>()?;
+    let ms = data
+        .iter()
+        .zip(&sims)
+        .map(|(d, y)| mse(&d.y_v, y))
+        .collect();
+    Ok((sims, ms))
+}
+
 /// Read the records named on the command line: CSV or MATLAB v5 `.mat` (with `vars`).
 pub fn load_data(paths: &[std::path::PathBuf], vars: Option<&str>) -> anyhow::Result<Vec<Data>> {
     if paths.is_empty() {

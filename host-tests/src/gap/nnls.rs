@@ -308,5 +308,16 @@ mod tests {
                 }
             }
         }
+        // Every variable held at 0 (all constrained, every gradient `b - A 0 = b` negative,
+        // so 0 meets the optimality conditions): the free set is empty from start to end.
+        let n = 8;
+        let m = DMatrix::<f64>::from_fn(12, n, |_, _| rng.gen_range(-1.0..1.0));
+        let a = m.transpose() * &m + DMatrix::identity(n, n);
+        let b = DVector::<f64>::from_fn(n, |_, _| -rng.gen_range(0.1..1.0));
+        let nonneg = vec![true; n];
+        let x = nnls_normal(&a, &b, &nonneg).expect("positive definite");
+        assert!(x.iter().all(|v| *v == 0.0), "{x}");
+        let xw = nnls_normal_from(&a, &b, &nonneg, Some(&[true; 8])).expect("warm");
+        assert!(xw.iter().all(|v| *v == 0.0), "{xw}");
     }
 }

@@ -10,7 +10,7 @@ use super::constants::{
     PRUNE_KEEP_EXCESS_VAR, PRUNE_PER_PARAM, PRUNE_RATIO, STATIC_TELL_RATIO, STOP_FLOOR_RATIO,
     STRUCTURE_ROUNDS,
 };
-use super::data::{Data, min_max, mse, noise_floor, sim};
+use super::data::{Data, min_max, mse, noise_floor, sim, simulate_all};
 use super::everett::CentreLine;
 use super::fast_fit::fit_fast;
 use super::signatures;
@@ -572,12 +572,7 @@ pub fn diagnose(base: &ModelFile, data: &[Data], opts: &Options) -> anyhow::Resu
                     m = catalogue::revert(&m, base, e);
                 }
                 let m = refit_slow(&m, &[], data, &slow_x, u_range)?;
-                let s: Vec<Vec<f64>> = data
-                    .iter()
-                    .map(|d| sim(&m, d))
-                    .collect::<anyhow::Result<_>>()
-                    .ok()?;
-                let ms = data.iter().zip(&s).map(|(d, y)| mse(&d.y_v, y)).collect();
+                let (s, ms) = simulate_all(&m, data).ok()?;
                 Some((unit.clone(), m, s, ms))
             },
         );
@@ -730,11 +725,7 @@ pub fn diagnose(base: &ModelFile, data: &[Data], opts: &Options) -> anyhow::Resu
             |(e, f)| -> Option<Fitted> {
                 let m = catalogue::revert(&model, base, e);
                 let m = refit_slow(&m, &[f.as_str()], data, &slow_x, u_range)?;
-                let s: Vec<Vec<f64>> = data
-                    .iter()
-                    .map(|d| sim(&m, d).ok())
-                    .collect::<Option<_>>()?;
-                let ms: Vec<f64> = data.iter().zip(&s).map(|(d, y)| mse(&d.y_v, y)).collect();
+                let (s, ms) = simulate_all(&m, data).ok()?;
                 Some((m, s, ms))
             },
         );
@@ -1116,15 +1107,7 @@ fn candidates(
     tasks.extend(slow_tasks);
     tasks.extend(FAST.iter().skip(1).map(|e| Task::Fast(e)));
     let simulated = |m: ModelFile| -> anyhow::Result<Fitted> {
-        let sims: Vec<Vec<f64>> = data
-            .iter()
-            .map(|d| sim(&m, d))
-            .collect::<anyhow::Result<_>>()?;
-        let mse_v = data
-            .iter()
-            .zip(&sims)
-            .map(|(d, s)| mse(&d.y_v, s))
-            .collect();
+        let (sims, mse_v) = simulate_all(&m, data)?;
         Ok((m, sims, mse_v))
     };
     let done: Vec<anyhow::Result<Option<Fitted>>> = par_map(&tasks, |t| {

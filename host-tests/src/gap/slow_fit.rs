@@ -3,10 +3,11 @@
 //! samples of all records ([`SlowRegressors`]: the drift lags for each grid time constant, the
 //! play operators, the gain terms), with the drift's and the play operators' weights kept
 //! non-negative ([`super::nnls`]). The three drift time constants are chosen from a log grid,
-//! then refined by coordinate descent ([`crate::util::golden_n`] on `log tau`), each try ranked
-//! by a Schur complement on the other columns' free set and the chosen ones solved
-//! exactly; one round of structural refinement follows where the stage's form is not linear
-//! in the parameters (the drift's `K(u)`, `K'(u)` on the play sum).
+//! then refined in `log tau` (a wide coordinate pass by [`crate::util::golden_n`], then damped
+//! Newton steps of the three, `newton_step`), each try ranked by a Schur complement on the
+//! other columns' free set and the chosen ones solved exactly; one round of structural
+//! refinement follows where the stage's form is not linear in the parameters (the drift's
+//! `K(u)`, `K'(u)` on the play sum).
 //!
 //! Records weigh equally (each record's normal equations are divided by its settled samples).
 
@@ -517,8 +518,7 @@ fn dot(a: &[f64], b: &[f64]) -> f64 {
 }
 
 /// The weighted Gram matrix of the input-only columns and the offset's ([`SlowRegressors`]'
-/// `gram`).
-#[allow(clippy::needless_range_loop)] // a triangle of the matrix
+/// `gram`): from the basis' moments where K'(u) scales it ([`KMoments`]), else directly.
 fn input_gram(x: &SlowRegressors) -> DMatrix<f64> {
     if let Some((c1, c2)) = x.kprime {
         let km = x.moments.get_or_init(|| k_moments(x));
@@ -619,14 +619,17 @@ impl KMoments {
         let k2 = [1.0, 2.0 * c1, c1 * c1 + 2.0 * c2, 2.0 * c1 * c2, c2 * c2];
         let is_hyst = |c: usize| (COL_HYST..COL_HYST + HYST_COLS).contains(&c);
         let mut g = DMatrix::<f64>::zeros(N_COLS, N_COLS);
+        // One triangle, mirrored (the products `f' (u^p f)` are symmetric but for rounding).
         for (a, &ca) in self.cols.iter().enumerate() {
-            for (b, &cb) in self.cols.iter().enumerate() {
+            for (b, &cb) in self.cols.iter().enumerate().take(a + 1) {
                 let k = match (is_hyst(ca), is_hyst(cb)) {
                     (true, true) => k2,
                     (true, false) | (false, true) => k1,
                     (false, false) => [1.0, 0.0, 0.0, 0.0, 0.0],
                 };
-                g[(ca, cb)] = (0..5).map(|p| k[p] * self.m[p][(a, b)]).sum();
+                let v: f64 = (0..5).map(|p| k[p] * self.m[p][(a, b)]).sum();
+                g[(ca, cb)] = v;
+                g[(cb, ca)] = v;
             }
         }
         gram_new_lags(x, &g)
@@ -1229,8 +1232,8 @@ fn fit_slow_linear(
             .copied()
             .filter(|&c| !is_hyst(c) || used_radii.contains(&radius_of(c)))
             .collect();
-        // Refine the three time constants continuously (golden section on log tau between
-        // the neighbouring grid values), each solve with the other columns.
+        // Refine the three time constants continuously (in log tau, between their
+        // neighbours), each try with the other columns.
         let mut taus = taus0;
         // The search evaluates on evenly thinned rows (DRIFT_SEARCH_ROWS a record), the final
         // solve on all of them.
@@ -1942,8 +1945,9 @@ impl<'a> DriftProblem<'a> {
     /// Only the free fixed columns enter the Schur complement, so the lags' products are
     /// taken with those alone. Each lag's part (its values at the rows, its product with the
     /// target, its projection on the fixed part) depends on its own time constant only, and a
-    /// coordinate search changes one of the three at a time: the parts are kept
-    /// ([`SchurSearch::parts`]) and only the new time constant's computed.
+    /// coordinate search or a Newton step's difference point changes one of the three at a
+    /// time: the parts are kept ([`SchurSearch::parts`]) and only the new time constant's
+    /// computed.
     fn value(&self, search: &SchurSearch, taus: &[f64; 3]) -> ([f64; 3], f64) {
         let parts = taus.map(|tau| search.part(self, tau));
         let mut gll = [[0.0f64; 3]; 3];
@@ -2043,7 +2047,7 @@ const NEWTON_MAX_LN: f64 = 1.0;
 
 /// One damped Newton step that raises `f` (a function of three log time constants,
 /// `-inf` outside its domain) from `x` where it is `fx`: the gradient and Hessian by central
-/// and forward differences of step [`NEWTON_STEP_LN`] (up to ten evaluations, which a caller
+/// and forward differences of step [`NEWTON_STEP_LN`] (up to nine evaluations, which a caller
 /// that keeps each coordinate's part shares: a move of one coordinate reuses the other two),
 /// then `(-H + lambda diag|H|) d = g` for each damping of [`NEWTON_DAMPING`] until a step (at
 /// most [`NEWTON_MAX_LN`] long) raises `f`. A coordinate whose difference points leave the
@@ -2215,7 +2219,8 @@ struct SchurSearch {
 }
 
 /// Lag parts a [`SchurSearch`] keeps: a coordinate step reuses the two time constants it
-/// does not move, so a few suffice.
+/// does not move, and a Newton step's difference points (each moves one) the other two and
+/// each other's (its three time constants, each at three points, and its trial step's).
 const SCHUR_PARTS_KEPT: usize = 16;
 
 impl SchurSearch {
@@ -2288,6 +2293,33 @@ mod tests {
             }
             other => panic!("{other:?}"),
         }
+        // A curved valley (Rosenbrock's, in the first two coordinates) from a start more than
+        // a step's cap away: steps capped at NEWTON_MAX_LN and damped where the Hessian is
+        // not negative definite; every step gains, and the steps end near the optimum (to
+        // 3e-3: the difference formulas' error, the step squared times the valley's third
+        // derivatives, 12 x 20 here, over its curvature; there a step that gains by the
+        // differences no longer gains, `Stuck`, and the caller's coordinate pass takes over).
+        let r = |x: [f64; 3]| {
+            -((x[0] - 1.0).powi(2) + 20.0 * (x[1] - x[0] * x[0]).powi(2) + (x[2] + 0.5).powi(2))
+        };
+        let (mut x, mut fx) = ([-1.5, 2.5, 2.0], r([-1.5, 2.5, 2.0]));
+        let mut longest = 0.0f64;
+        for _ in 0..200 {
+            match newton_step(&r, x, fx) {
+                Newton::Moved(y, v) => {
+                    assert!(v > fx);
+                    let len = (0..3).map(|k| (y[k] - x[k]).abs()).fold(0.0, f64::max);
+                    longest = longest.max(len);
+                    (x, fx) = (y, v);
+                }
+                Newton::Converged | Newton::Stuck => break,
+            }
+        }
+        assert!(longest <= NEWTON_MAX_LN + 1e-12, "a step of {longest}");
+        assert!(longest > 0.5, "the start was far: {longest}");
+        for (k, want) in [1.0, 1.0, -0.5].into_iter().enumerate() {
+            assert!((x[k] - want).abs() < 3e-3, "{x:?}");
+        }
         // Nothing free: the caller must search otherwise.
         let h = |x: [f64; 3]| if x == start { g(x) } else { f64::NEG_INFINITY };
         assert_eq!(newton_step(&h, start, h(start)), Newton::Stuck);
@@ -2301,20 +2333,30 @@ mod tests {
     #[test]
     fn scaled_gram_from_moments_equals_the_direct_one() {
         use crate::io::csv::Record;
-        let n = 3000;
-        let t: Vec<f64> = (0..n).map(|i| i as f64 * 1e-3).collect();
-        let u: Vec<f64> = t
-            .iter()
-            .map(|&x| 5.0 + 5.5 * (2.0 * std::f64::consts::PI * 0.7 * x).sin() * (0.3 + x / 3.0))
-            .collect();
-        let y = vec![0.0; n];
-        let d =
-            Data::from_record("sine", Record::new(t, u.clone(), Some(y), None).unwrap()).unwrap();
-        let data = [d];
+        // Two records of different lengths (each weighs by its own rows).
+        let record = |n: usize, f_hz: f64, grow: f64| {
+            let t: Vec<f64> = (0..n).map(|i| i as f64 * 1e-3).collect();
+            let u: Vec<f64> = t
+                .iter()
+                .map(|&x| {
+                    5.0 + 5.5 * (2.0 * std::f64::consts::PI * f_hz * x).sin() * (0.3 + x / grow)
+                })
+                .collect();
+            let y = vec![0.0; n];
+            let d = Data::from_record("sine", Record::new(t, u.clone(), Some(y), None).unwrap())
+                .unwrap();
+            (d, u)
+        };
+        let (d1, u1) = record(3000, 0.7, 3.0);
+        let (d2, u2) = record(1700, 1.3, 1.5);
+        let data = [d1, d2];
         for form in [everett::CentreLine::Band, everett::CentreLine::Span] {
             let rows = SolveRows {
-                rows: vec![(0..n).step_by(2).collect()],
-                u_fit: vec![u.clone()],
+                rows: vec![
+                    (0..3000).step_by(2).collect(),
+                    (5..1700).step_by(3).collect(),
+                ],
+                u_fit: vec![u1.clone(), u2.clone()],
             };
             let base = slow_regressors(&data, rows, &[], 0.79, form);
             for (c1, c2) in [(0.02, -0.001), (-0.05, 0.004)] {
@@ -2325,7 +2367,10 @@ mod tests {
                 };
                 let x = slow_regressors_shaped(&data, &shape, &base);
                 let fast = input_gram(&x);
-                assert!(x.moments.get().is_some(), "the moments path was not taken");
+                assert!(
+                    x.moments.get().is_some_and(|m| m.range == x.kprime_range),
+                    "the moments path was not taken"
+                );
                 let direct = input_gram_direct(&x);
                 let scale = direct.amax();
                 let err = (&fast - &direct).amax();

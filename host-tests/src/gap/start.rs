@@ -12,8 +12,9 @@
 //! wiped the difference out; plus [`START_SETTLE_S`] for the plant to forget it), at most
 //! [`START_HEAD_MAX_S`] (beyond, the residual's change is the table's difference times the
 //! stage's response to it fitted over the head), and the candidate that lowers the residual
-//! power the most is taken; on a single record the best [`START_REFITTED`] are taken, each with its excursions
-//! from the first input scaled to the depth that lowers it most ([`START_SCALE`]: the
+//! power the most is taken; on a single record the best [`START_REFITTED`] are taken, each
+//! with its excursions from the first input scaled to the depth that lowers it most
+//! ([`START_SCALE`]: the
 //! candidates are a coarse grid). The hysteresis basis is then recomputed from that memory
 //! and the slow effects refitted with it (on a single record for each of them, the one that
 //! leaves the least kept); the result is kept only if every record's residual is no worse
@@ -33,10 +34,10 @@ use crate::io::model_file::ModelFile;
 use crate::util::par_map;
 use model_core::hysteresis::{HysteresisMemory, HysteresisTable};
 
-/// Time the plant and drift are given to forget a different start after the hysteresis
-/// memories agree again, seconds (our assumption: the thesis' plant settles in about 1 ms and
-/// the fast drift lag is 2.5 ms or more; 50 ms covers the slow tail of what a start moves
-/// without simulating the whole record for each candidate).
+/// Time the plant and drift are given to forget a different start after the table's outputs
+/// from two memories stop moving apart, seconds (our assumption: the thesis' plant settles in
+/// about 1 ms and the fast drift lag is 2.5 ms or more; 50 ms covers the slow tail of what a
+/// start moves without simulating the whole record for each candidate).
 pub const START_SETTLE_S: f64 = 0.05;
 
 /// Longest head simulated for a candidate start, seconds (our assumption: beyond, the
@@ -71,29 +72,39 @@ pub struct StartFit {
 
 /// The difference of a table's outputs driven from memory `a` and from memory `b`, as a
 /// simulation's output at each sample sees it (element `i`: after the inputs before sample
-/// `i`; one more element, after the last input), zero where it is under 1 uV; and the first
-/// sample from which it no longer changes (by 1 uV).
+/// `i`, one element a sample), zero where it is under 1 uV; and the first sample from which it
+/// no longer changes (by 1 uV). Where the memories come to agree (the input wiped the
+/// difference out: the same turning points and output) the rest is zero without running on.
 fn table_difference(
     t: &HysteresisTable,
     u_v: &[f64],
     mut a: HysteresisMemory,
     mut b: HysteresisMemory,
 ) -> (Vec<f64>, usize) {
-    let mut diff = Vec::with_capacity(u_v.len() + 1);
-    diff.push((a.output_v() - b.output_v()) as f64);
+    let n = u_v.len();
+    let mut diff = Vec::with_capacity(n);
     for &u in u_v {
-        diff.push((t.forward(&mut a, u as f32) - t.forward(&mut b, u as f32)) as f64);
-    }
-    for v in diff.iter_mut() {
-        if v.abs() < 1e-6 {
-            *v = 0.0;
+        let same = a.turning_points_v().eq(b.turning_points_v())
+            && (a.output_v() - b.output_v()).abs() < 1e-6;
+        if same {
+            let from = diff.len();
+            diff.resize(n, 0.0);
+            // Zero from here on: the difference stops changing where it last was not zero.
+            let last_moving = diff[..from].iter().rposition(|v: &f64| v.abs() >= 1e-6);
+            return (diff, last_moving.map_or(0, |i| i + 1));
         }
+        let d = (a.output_v() - b.output_v()) as f64;
+        diff.push(if d.abs() < 1e-6 { 0.0 } else { d });
+        t.forward(&mut a, u as f32);
+        t.forward(&mut b, u as f32);
     }
-    let last = diff[u_v.len()];
+    let Some(&last) = diff.last() else {
+        return (diff, 0);
+    };
     let from = diff
         .iter()
         .rposition(|v| (v - last).abs() > 1e-6)
-        .map_or(0, |i| (i + 1).min(u_v.len()));
+        .map_or(0, |i| i + 1);
     (diff, from)
 }
 
@@ -134,7 +145,8 @@ pub fn search(
             .into_iter()
             .filter(|c| *c != x_start)
             .collect();
-        // Residual power change over each record's affected head, for a candidate memory.
+        // Residual power change over each record, for a candidate memory: simulated over its
+        // head, ranked by the table's difference beyond.
         let gain_of = |c: &Vec<f64>| -> Option<f64> {
             let hist: Vec<f32> = c.iter().map(|&v| v as f32).collect();
             let mut m = model.clone();
@@ -174,6 +186,8 @@ pub fn search(
                     let (num, den) = (0..k).fold((0.0, 0.0), |(n, q), i| {
                         (n + (y[i] - s_now[i]) * diff[i], q + diff[i] * diff[i])
                     });
+                    // (Where the head shows no difference, 1: the table's output is in the
+                    // monitor's volts, and K'(u) and a sensor gain stay near 1.)
                     let scale = if den > 0.0 { num / den } else { 1.0 };
                     for i in k..d.len() {
                         let r = d.y_v[i] - s_now[i];
