@@ -172,10 +172,7 @@ fn cannot_tell(
                 extra.push("sensor-gain");
             }
             let m = refit_slow(&m, &extra, data, slow_x, u_range)?;
-            let ms: Vec<f64> = data
-                .iter()
-                .map(|d| sim(&m, d).ok().map(|s| mse(&d.y_v, &s)))
-                .collect::<Option<_>>()?;
+            let (_, ms) = simulate_all(&m, data).ok()?;
             let r2 = CANNOT_TELL_RATIO * CANNOT_TELL_RATIO;
             let near = ms.iter().zip(cur_mse).all(|(a, b)| *a <= r2 * *b);
             near.then(|| CannotTell {
@@ -1097,14 +1094,11 @@ fn candidates(
         Slow(Vec<&'a str>),
         Fast(&'static str),
     }
-    let mut slow_tasks: Vec<Task> = distinct.iter().cloned().map(Task::Slow).collect();
-    slow_tasks.sort_by_key(|t| match t {
-        Task::Slow(set) => std::cmp::Reverse(slow_cost(set)),
-        _ => std::cmp::Reverse(0),
-    });
+    let mut by_cost = distinct.clone();
+    by_cost.sort_by_key(|set| std::cmp::Reverse(slow_cost(set)));
     let mut tasks: Vec<Task> = vec![Task::Base];
     tasks.extend(FAST.iter().take(1).map(|e| Task::Fast(e)));
-    tasks.extend(slow_tasks);
+    tasks.extend(by_cost.into_iter().map(Task::Slow));
     tasks.extend(FAST.iter().skip(1).map(|e| Task::Fast(e)));
     let simulated = |m: ModelFile| -> anyhow::Result<Fitted> {
         let (sims, mse_v) = simulate_all(&m, data)?;

@@ -76,8 +76,8 @@ pub struct Signatures {
 pub const WELCH_SEGMENT: usize = 1024;
 
 /// The loop of a record's held levels (`None` with fewer than [`HELD_LOOP_MIN_HOLDS`] holds
-/// of [`HELD_LOOP_MIN_S`] or more after a step ([`Data::holds_of`]), or fewer than two reached each way): the
-/// residual's mean over each hold's second half (settled), fitted by least squares to a
+/// of [`HELD_LOOP_MIN_S`] or more after a step ([`Data::holds_of`]), or fewer than two
+/// reached each way): the residual's mean over each hold's second half (settled), fitted by least squares to a
 /// static quadratic in the input plus `g` times the direction of the step into the hold (+1
 /// up, -1 down); the loop is `2 |g|`, the gap between levels reached from below and from
 /// above at equal input. The quadratic takes a scale, an offset or a curvature of the static
@@ -469,7 +469,8 @@ mod tests {
     /// The held levels' loop finds the direction's gap (2 g) beside a static quadratic, finds
     /// none where the levels depend on the input alone, and declines with too few holds,
     /// holds reached one way only, or levels whose direction follows from the level (a
-    /// square wave, a repeated 0-5-10-0 cycle). Tolerance: the fit is exact for these residuals, so 1e-9 V.
+    /// square wave, a repeated 0-5-10-0 cycle). Tolerance: the fit is exact for these
+    /// residuals, so 1e-9 V.
     #[test]
     fn held_levels_show_a_loop_of_steps_alone() {
         let levels = [2.0, 5.0, 3.0, 7.0, 4.0, 8.0, 1.0, 6.0];

@@ -907,31 +907,32 @@ fn fit_drift_poly(
         };
         // The fixed columns' products with the drift columns: a blocked matrix product
         // (nalgebra's gemm) over the columns the regressors keep, the sensor gain's apart.
-        let kept: Vec<usize> = (0..nf).filter(|&i| fixed[i] != COL_SGAIN).collect();
-        let kept_cols: Vec<usize> = kept.iter().map(|&i| fixed[i]).collect();
+        let kept_cols: Vec<usize> = fixed.iter().copied().filter(|&c| c != COL_SGAIN).collect();
         // (The drift columns stored row by row are, read column by column, their transpose.)
-        let mut df = DMatrix::<f64>::zeros(nd, kept.len());
+        let mut df = DMatrix::<f64>::zeros(nd, kept_cols.len());
         for block in row_blocks(n) {
             let f = design(&x.cols[r], block.clone(), &kept_cols);
             let dt =
                 DMatrix::from_column_slice(nd, block.len(), &dr[block.start * nd..block.end * nd]);
             df += dt * f;
         }
+        // (`p`: the column's place among those the product took.)
+        let mut p = 0;
         for (i, &ci) in fixed.iter().enumerate() {
             let ci_v = column(ci);
             b_f[i] += w * dot(ci_v, &e);
-            let gd: Vec<f64> = match kept.iter().position(|&k| k == i) {
-                Some(p) => df.column(p).iter().copied().collect(),
-                None => {
-                    for (j, &cj) in fixed.iter().enumerate() {
-                        let gs = w * dot(ci_v, column(cj));
-                        g_ff[(i, j)] += gs;
-                        if i != j {
-                            g_ff[(j, i)] += gs;
-                        }
+            let gd: Vec<f64> = if ci == COL_SGAIN {
+                for (j, &cj) in fixed.iter().enumerate() {
+                    let gs = w * dot(ci_v, column(cj));
+                    g_ff[(i, j)] += gs;
+                    if i != j {
+                        g_ff[(j, i)] += gs;
                     }
-                    with_drift(ci_v)
                 }
+                with_drift(ci_v)
+            } else {
+                p += 1;
+                df.column(p - 1).iter().copied().collect()
             };
             for q in 0..nk {
                 for k in 0..6 {
