@@ -66,7 +66,24 @@ pub struct SlowRegressors {
     /// sensor-gain column, which cost two products per column and row instead of a column's
     /// worth each.
     gram: std::sync::OnceLock<DMatrix<f64>>,
+    /// The columns' weighted products with a target and with the sensor gain's column, for
+    /// the last few models without slow effects (`y0`, keyed by its bits:
+    /// [`TargetProducts`]): a step's candidates, and the final check's and the swaps' trials
+    /// that take out a slow effect, solve on the same regressors against the same `y0`.
+    products: std::sync::Mutex<Vec<(u64, std::sync::Arc<TargetProducts>)>>,
 }
+
+/// The regressors' weighted products with the target `y - y0` (`b`) and with the sensor
+/// gain's column `y0` (`g_s`, that column's row of the Gram matrix; its entry with itself
+/// and with the offset's column included), over the records.
+struct TargetProducts {
+    b: DVector<f64>,
+    g_s: DVector<f64>,
+}
+
+/// Models without slow effects whose products a [`SlowRegressors`] keeps (our assumption: a
+/// step's candidates share one, the final check's trials a few).
+const PRODUCTS_KEPT: usize = 4;
 
 impl SlowRegressors {
     /// The hysteresis table's input range.
@@ -216,6 +233,7 @@ pub(super) fn slow_regressors(
         form,
         table_gain,
         gram: std::sync::OnceLock::new(),
+        products: Default::default(),
     };
     slow_regressors_shaped(data, &Shape::default(), &base)
 }
@@ -502,6 +520,7 @@ fn slow_regressors_shaped(data: &[Data], shape: &Shape, base: &SlowRegressors) -
         form: base.form,
         table_gain: base.table_gain,
         gram: std::sync::OnceLock::new(),
+        products: Default::default(),
     };
     // With the base's K'(u) only the lags changed.
     if shape.kprime == base.kprime
@@ -1045,33 +1064,18 @@ fn fit_slow_linear(
     start: Option<[f64; 3]>,
 ) -> Option<SlowParams> {
     // Gram matrix of all columns and the target: the input-only part is the regressors' own
-    // (computed once), the sensor gain's column (`y0`) and the target are this call's.
+    // (computed once), the sensor gain's column (`y0`) and the target are this `y0`'s (kept
+    // for the few last).
     let mut g = x.gram.get_or_init(|| input_gram(x)).clone();
-    let mut b = DVector::<f64>::zeros(N_COLS);
-    for (r, d) in data.iter().enumerate() {
-        let cols = &x.cols[r];
-        let rows = &x.rows[r];
-        let w = 1.0 / rows.len().max(1) as f64;
-        let e: Vec<f64> = rows.iter().map(|&i| d.y_v[i] - y0[r][i]).collect();
-        let s: Vec<f64> = rows.iter().map(|&i| y0[r][i]).collect();
-        for (k, c) in cols.iter().enumerate() {
-            // Both products in one pass over the column (the pass is memory-bound).
-            let (ce, cs) = c
-                .iter()
-                .zip(e.iter().zip(&s))
-                .fold((0.0, 0.0), |(a, b), (v, (x, y))| (a + v * x, b + v * y));
-            b[k] += w * ce;
-            let gs = w * cs;
-            g[(k, COL_SGAIN)] += gs;
-            g[(COL_SGAIN, k)] += gs;
+    let tp = target_products(data, y0, x);
+    let b = tp.b.clone();
+    for k in 0..N_COLS {
+        if k != COL_SGAIN {
+            g[(k, COL_SGAIN)] += tp.g_s[k];
+            g[(COL_SGAIN, k)] += tp.g_s[k];
         }
-        b[COL_OFFSET] += w * e.iter().sum::<f64>();
-        b[COL_SGAIN] += w * dot(&s, &e);
-        let gs = w * s.iter().sum::<f64>();
-        g[(COL_OFFSET, COL_SGAIN)] += gs;
-        g[(COL_SGAIN, COL_OFFSET)] += gs;
-        g[(COL_SGAIN, COL_SGAIN)] += w * dot(&s, &s);
     }
+    g[(COL_SGAIN, COL_SGAIN)] += tp.g_s[COL_SGAIN];
     let solve = |idx: &[usize], warm: Option<&[bool]>| -> Option<(Vec<f64>, f64)> {
         let p = idx.len();
         let mut a = DMatrix::<f64>::zeros(p, p);
@@ -1378,6 +1382,63 @@ fn fit_slow_linear(
         let (beta, _) = solve(&fixed, None)?;
         Some(descale(unpack(&fixed, &beta, None)))
     }
+}
+
+/// The [`TargetProducts`] of `x` for the model without slow effects `y0` (kept in `x` for
+/// the last [`PRODUCTS_KEPT`] of them).
+fn target_products(
+    data: &[Data],
+    y0: &[Vec<f64>],
+    x: &SlowRegressors,
+) -> std::sync::Arc<TargetProducts> {
+    use std::hash::{Hash, Hasher};
+    let mut h = std::collections::hash_map::DefaultHasher::new();
+    for y in y0 {
+        y.len().hash(&mut h);
+        for v in y {
+            v.to_bits().hash(&mut h);
+        }
+    }
+    let key = h.finish();
+    let kept = |k: u64| {
+        x.products
+            .lock()
+            .ok()
+            .and_then(|p| p.iter().find(|(q, _)| *q == k).map(|(_, t)| t.clone()))
+    };
+    if let Some(t) = kept(key) {
+        return t;
+    }
+    let mut b = DVector::<f64>::zeros(N_COLS);
+    let mut g_s = DVector::<f64>::zeros(N_COLS);
+    for (r, d) in data.iter().enumerate() {
+        let cols = &x.cols[r];
+        let rows = &x.rows[r];
+        let w = 1.0 / rows.len().max(1) as f64;
+        let e: Vec<f64> = rows.iter().map(|&i| d.y_v[i] - y0[r][i]).collect();
+        let s: Vec<f64> = rows.iter().map(|&i| y0[r][i]).collect();
+        for (k, c) in cols.iter().enumerate() {
+            // Both products in one pass over the column (the pass is memory-bound).
+            let (ce, cs) = c
+                .iter()
+                .zip(e.iter().zip(&s))
+                .fold((0.0, 0.0), |(a, b), (v, (x, y))| (a + v * x, b + v * y));
+            b[k] += w * ce;
+            g_s[k] += w * cs;
+        }
+        b[COL_OFFSET] += w * e.iter().sum::<f64>();
+        b[COL_SGAIN] += w * dot(&s, &e);
+        g_s[COL_OFFSET] += w * s.iter().sum::<f64>();
+        g_s[COL_SGAIN] += w * dot(&s, &s);
+    }
+    let t = std::sync::Arc::new(TargetProducts { b, g_s });
+    if let Ok(mut p) = x.products.lock() {
+        if p.len() >= PRODUCTS_KEPT {
+            p.remove(0);
+        }
+        p.push((key, t.clone()));
+    }
+    t
 }
 
 /// The slow effects' weights as the stage has them: the monitor's scale error `g` multiplies
