@@ -330,17 +330,11 @@ impl Tally {
 const TALLY_HEADER: &str =
     "                         cases   exact  false / given          missed  clean named  s/case";
 
-/// Issue #12's requirements on 100 drawn cases: >= 95 % exact named sets, <= 1 % false names
-/// (of the names given), no name on a clean record. Measured on the workflow of ccaf5d5
-/// (release, 2 cores, ~8 min): 75 % exact, 27 of 130 names false (20.8 %), 0 of 15 clean cases
-/// named; identification 95.5 %, long sine 60.7 %, sweep 70.8 %, random levels 76.9 %. Most
-/// failures are a non-play hysteresis on a sine or a chirp that the play sum leaves 10-50x above
-/// the floor, the rest taken by whichever slow effect correlates best.
-#[test]
-#[ignore = "issue #12: workflow does not yet meet this on all families"]
-fn randomised_families_are_named() {
-    // Release (the README's test command): 100 cases, seeds 1000..1099 (`GAP_CASES` changes
-    // the count, `GAP_SEED=N` runs case N alone). Debug builds run 6.
+/// Runs the drawn cases (release, the README's test command: 100, seeds 1000..1099,
+/// `GAP_CASES` changes the count, `GAP_SEED=N` runs case N alone; debug builds run 6), prints
+/// the confusion table and the tallies by family, hidden effect and truth form, and returns the
+/// overall tally (`None` for a single case).
+fn run_suite() -> Option<Tally> {
     let release = !cfg!(debug_assertions);
     let n_cases: u64 = std::env::var("GAP_CASES")
         .ok()
@@ -439,12 +433,51 @@ fn randomised_families_are_named() {
         all.clean_named,
         all.clean
     );
-    if only.is_some() {
+    only.is_none().then_some(all)
+}
+
+/// What the workflow holds on the drawn cases today, as a guard against regressions (the
+/// test command runs it and prints the confusion table): no name on a clean record, and at
+/// least 75 % exact named sets with at most 10 % false names, in release with 100 cases or
+/// more. Measured on 473fd59 (ci profile, 2 cores, 216 s): 79.0 % exact, 9 false names of
+/// 114 (7.9 %), 0 of 15 clean cases named, the same 21 failing cases since session 16; the
+/// margins (4 points, 2 points) are a case or two of the 100, so a change that moves the
+/// workflow's decisions on a few cases shows here. The issue's own figures are the ignored
+/// test below.
+#[test]
+fn randomised_families_hold_their_measured_rates() {
+    let Some(all) = run_suite() else {
         return;
-    }
-    // Issue #12's requirements, as stated.
+    };
     assert_eq!(all.clean_named, 0, "clean records must get no name");
-    if release {
+    if !cfg!(debug_assertions) && std::env::var("GAP_CASES").is_err() {
+        assert!(all.cases >= 100, "{} cases, at least 100", all.cases);
+        assert!(
+            all.exact_pct() >= 75.0,
+            "exact {:.1} % below the measured 79 % less its margin",
+            all.exact_pct()
+        );
+        assert!(
+            all.false_pct() <= 10.0,
+            "false names {:.1} % above the measured 7.9 % plus its margin",
+            all.false_pct()
+        );
+    }
+}
+
+/// Issue #12's requirements on 100 drawn cases: >= 95 % exact named sets, <= 1 % false names
+/// (of the names given), no name on a clean record. Not met: 79.0 % exact and 7.9 % false
+/// names (see the test above and `host-tests/GAP.md`); most failures are a loop of another
+/// form (Bouc-Wen, Duhem) on a sine or a chirp beside a static shape the records cannot tell
+/// from the table's misfit.
+#[test]
+#[ignore = "issue #12: workflow does not yet meet this on all families"]
+fn randomised_families_are_named() {
+    let Some(all) = run_suite() else {
+        return;
+    };
+    assert_eq!(all.clean_named, 0, "clean records must get no name");
+    if !cfg!(debug_assertions) {
         assert!(all.cases >= 100, "{} cases, at least 100", all.cases);
         assert!(
             all.exact_pct() >= 95.0,
@@ -456,91 +489,5 @@ fn randomised_families_are_named() {
             "false names {:.1} % above 1 %",
             all.false_pct()
         );
-    }
-}
-
-/// The truth forms do what the module notes say: every loop counter-clockwise and as wide as
-/// drawn; the Preisach plane and the play operators keep return-point memory and wipe out
-/// (Bouc-Wen and Duhem need not); the creep banks follow their laws within 2 % from 10 ms to
-/// 30 s; the static maps keep `m(0) = 0`, `m'(0) = 1` and deviate `amp` at most.
-#[test]
-fn truth_forms_follow_their_laws() {
-    let grid: Vec<f64> = (0..=500).map(|i| i as f64 * 0.02).collect();
-    let mut worst_width = 0.0f64;
-    for seed in 0..40u64 {
-        let mut rng = StdRng::seed_from_u64(seed);
-        let h = Hysteresis::draw(&mut rng);
-        let mut path = vec![0.0, 10.0, 0.0];
-        path.extend(&grid);
-        path.extend(grid.iter().rev());
-        let y = Hysteresis {
-            before: Vec::new(),
-            ..h
-        };
-        let out = y.apply(&path);
-        assert!(out.iter().all(|v| v.is_finite()), "{:?}", y.form);
-        let up = &out[3..3 + grid.len()];
-        let down: Vec<f64> = out[3 + grid.len()..].iter().rev().copied().collect();
-        let gaps: Vec<f64> = up.iter().zip(&down).map(|(a, b)| b - a).collect();
-        let width = gaps.iter().copied().fold(0.0f64, f64::max);
-        let crossing = gaps.iter().copied().fold(0.0f64, f64::min);
-        // Bouc-Wen's branches may cross by a hair next to the reversal points.
-        assert!(
-            crossing >= -0.01 * width,
-            "{:?}: rising above falling by {crossing}",
-            y.form
-        );
-        worst_width = worst_width.max((width / (10.0 * y.share) - 1.0).abs());
-        if matches!(
-            y.form,
-            families::HystForm::Preisach { .. } | families::HystForm::Pi { .. }
-        ) {
-            let a = y.apply(&[2.0, 8.0, 4.0, 6.0, 4.0, 9.0]);
-            let b = y.apply(&[2.0, 9.0]);
-            assert!(
-                (a[2] - a[4]).abs() < 1e-9,
-                "{}: return point",
-                y.form.label()
-            );
-            assert!((a[5] - b[1]).abs() < 1e-9, "{}: wiping out", y.form.label());
-        }
-    }
-    println!(
-        "loop widths within {:.2} % of the drawn ones",
-        100.0 * worst_width
-    );
-    assert!(worst_width < 1e-6);
-    let t: Vec<f64> = (0..30_000).map(|i| i as f64 * 1e-3).collect();
-    let mut u = vec![1.0; t.len()];
-    u[0] = 0.0;
-    for seed in 0..10u64 {
-        let mut rng = StdRng::seed_from_u64(seed);
-        let c = Creep::draw(&mut rng);
-        let out = c.apply(&t, &u);
-        let law = |s: f64| match c {
-            Creep::Log { gamma, tau0_s } => gamma * (1.0 + s / tau0_s).ln(),
-            Creep::Power { a, tau0_s, share } => {
-                share * ((s + tau0_s).powf(a) - tau0_s.powf(a))
-                    / ((10.0 + tau0_s).powf(a) - tau0_s.powf(a))
-            }
-        };
-        for i in [11usize, 101, 1001, 10_001, 29_999] {
-            // Sample i holds the bank's state after i - 1 steps of the held unit input.
-            let got = out[i] * model_core::params::PLANT_GAIN;
-            let want = law(t[i - 1]);
-            assert!(
-                (got / want - 1.0).abs() < 0.02,
-                "{c:?} at {} s: {got} against {want}",
-                t[i - 1]
-            );
-        }
-        let m = StaticMap::draw(&mut rng);
-        assert!(m.map(0.0).abs() < 1e-12);
-        assert!(((m.map(1e-4) - m.map(-1e-4)) / 2e-4 - 1.0).abs() < 1e-4);
-        let dev = grid
-            .iter()
-            .map(|&v| (m.map(v) - v).abs())
-            .fold(0.0f64, f64::max);
-        assert!((dev / m.amp_v.abs() - 1.0).abs() < 1e-3, "{m:?}");
     }
 }

@@ -858,7 +858,14 @@ fn fit_drift_poly(
             g_in[(fixed[i], fixed[j])]
         }
     });
-    let mut b_f = DVector::<f64>::zeros(nf);
+    let tp = target_products(data, y0, x);
+    let b_f = DVector::<f64>::from_fn(nf, |i, _| tp.b[fixed[i]]);
+    if let Some(i) = fixed.iter().position(|&c| c == COL_SGAIN) {
+        for (j, &cj) in fixed.iter().enumerate() {
+            g_ff[(i, j)] = tp.g_s[cj];
+            g_ff[(j, i)] = tp.g_s[cj];
+        }
+    }
     let mut g_d = vec![DMatrix::<f64>::zeros(6, np); nk];
     let mut b_d = vec![DVector::<f64>::zeros(6); nk];
     for (r, d) in data.iter().enumerate() {
@@ -935,20 +942,12 @@ fn fit_drift_poly(
                 DMatrix::from_column_slice(nd, block.len(), &dr[block.start * nd..block.end * nd]);
             df += dt * f;
         }
-        // (`p`: the column's place among those the product took.)
+        // (`p`: the column's place among those the product took. The fixed columns' products
+        // with the target and the sensor gain's are the regressors' kept ones, below.)
         let mut p = 0;
         for (i, &ci) in fixed.iter().enumerate() {
-            let ci_v = column(ci);
-            b_f[i] += w * dot(ci_v, &e);
             let gd: Vec<f64> = if ci == COL_SGAIN {
-                for (j, &cj) in fixed.iter().enumerate() {
-                    let gs = w * dot(ci_v, column(cj));
-                    g_ff[(i, j)] += gs;
-                    if i != j {
-                        g_ff[(j, i)] += gs;
-                    }
-                }
-                with_drift(ci_v)
+                with_drift(column(ci))
             } else {
                 p += 1;
                 df.column(p - 1).iter().copied().collect()
