@@ -62,9 +62,8 @@ pub struct SlowRegressors {
     table_gain: f64,
     /// The records' weighted Gram matrix of the columns that depend on the input alone and
     /// the offset's (the sensor gain's row and column zero), computed at the first solve and
-    /// kept: every candidate of a step solves on the same regressors with its own target and
-    /// sensor-gain column, which cost two products per column and row instead of a column's
-    /// worth each.
+    /// kept: every candidate of a step solves on the same regressors, adding only the
+    /// products with its target and sensor-gain column (themselves kept in `products`).
     gram: std::sync::OnceLock<DMatrix<f64>>,
     /// The columns' weighted products with a target and with the sensor gain's column, for
     /// the last few models without slow effects (`y0`, keyed by its bits:
@@ -1067,7 +1066,7 @@ fn fit_slow_linear(
     // for the few last).
     let mut g = x.gram.get_or_init(|| input_gram(x)).clone();
     let tp = target_products(data, y0, x);
-    let b = tp.b.clone();
+    let b = &tp.b;
     for k in 0..N_COLS {
         if k != COL_SGAIN {
             g[(k, COL_SGAIN)] += tp.g_s[k];
@@ -1137,7 +1136,7 @@ fn fit_slow_linear(
             .count()
             .max(3);
         let grid = catalogue::DRIFT_TAU_GRID_S;
-        let problem = DriftProblem::new(data, y0, x, &fixed, &g, &b, usize::MAX);
+        let problem = DriftProblem::new(data, y0, x, &fixed, &g, b, usize::MAX);
         // A refit from earlier time constants (the structural round) starts there: the grid
         // is for a fit from nothing.
         let (taus0, beta_grid) = if let Some(t0) = start {
@@ -1184,8 +1183,8 @@ fn fit_slow_linear(
                 best.map(|b| b.1)
             };
             // Each exact solve starts from the last one's positive set ([`warm_set`]): the
-            // fixed columns are the same and only the three lags change (the same optimum,
-            // fewer factorisations).
+            // fixed columns are the same and only the three lags change (the same optimum
+            // within the solver's tolerance, fewer factorisations).
             let spread = [0, n_tau / 2, n_tau - 1];
             let ranked = solve_aug(&with_fixed(spread), None)
                 .and_then(|(b0, _, a)| Some((rank(&a)?, warm_set(b0.as_slice()))))
@@ -1244,10 +1243,10 @@ fn fit_slow_linear(
         let mut taus = taus0;
         // The search evaluates on evenly thinned rows (DRIFT_SEARCH_ROWS a record), the final
         // solve on all of them.
-        let search = DriftProblem::new(data, y0, x, &fixed_search, &g, &b, DRIFT_SEARCH_ROWS);
+        let search = DriftProblem::new(data, y0, x, &fixed_search, &g, b, DRIFT_SEARCH_ROWS);
         // The searches' and the final solve's first active-set solves start from the grid's
-        // best solution's positive set (the lags free): the same optimum, fewer changes of
-        // the set than from none.
+        // best solution's positive set (the lags free): the same optimum within the solver's
+        // tolerance, fewer changes of the set than from none.
         let positive = |c: usize| {
             fixed
                 .iter()
@@ -1384,18 +1383,19 @@ fn fit_slow_linear(
 }
 
 /// The [`TargetProducts`] of `x` for the model without slow effects `y0` (kept in `x` for
-/// the last [`PRODUCTS_KEPT`] of them).
+/// the last [`PRODUCTS_KEPT`] of them). `data` are the records `x` was built from.
 fn target_products(
     data: &[Data],
     y0: &[Vec<f64>],
     x: &SlowRegressors,
 ) -> std::sync::Arc<TargetProducts> {
     use std::hash::{Hash, Hasher};
+    // The products read `y0` at the regressors' rows only: the key is those values' bits.
     let mut h = std::collections::hash_map::DefaultHasher::new();
-    for y in y0 {
-        y.len().hash(&mut h);
-        for v in y {
-            v.to_bits().hash(&mut h);
+    for (y, rows) in y0.iter().zip(&x.rows) {
+        rows.len().hash(&mut h);
+        for &i in rows {
+            y[i].to_bits().hash(&mut h);
         }
     }
     let key = h.finish();
@@ -1432,6 +1432,10 @@ fn target_products(
     }
     let t = std::sync::Arc::new(TargetProducts { b, g_s });
     if let Ok(mut p) = x.products.lock() {
+        // (A parallel candidate may have computed the same ones meanwhile.)
+        if let Some((_, kept)) = p.iter().find(|(q, _)| *q == key) {
+            return kept.clone();
+        }
         if p.len() >= PRODUCTS_KEPT {
             p.remove(0);
         }
