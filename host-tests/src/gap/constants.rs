@@ -42,8 +42,9 @@ pub const MAX_MODE_DAMPING: f64 = 0.25;
 /// 1 mV of noise; two passes of coordinate descent, the earlier fixed count, left the demo at
 /// 2.5x its floor, eight reach 1.1x).
 pub const DRIFT_REFINE_TOL_V2: f64 = 1e-10;
-/// ... or after this many iterations (the name is the coordinate passes' it once counted).
-pub const DRIFT_REFINE_PASSES: usize = 12;
+/// ... or after this many iterations (Newton steps, or coordinate passes where a step
+/// cannot gain).
+pub const DRIFT_REFINE_ITERATIONS: usize = 12;
 /// Rounds of the slow fit's structural refinement (K(u) of the drift with its knee, K'(u) on
 /// the play sum) for a model the workflow keeps (a step's refit, the final check), where a
 /// drift's K is fitted (without one, one round: K'(u) alone settles in it). Measured

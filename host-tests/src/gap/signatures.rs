@@ -77,11 +77,11 @@ pub const WELCH_SEGMENT: usize = 1024;
 
 /// The loop of a record's held levels (`None` with fewer than [`HELD_LOOP_MIN_HOLDS`] holds
 /// of [`HELD_LOOP_MIN_S`] or more after a step ([`Data::holds_of`]), or fewer than two
-/// reached each way): the residual's mean over each hold's second half (settled), fitted by least squares to a
-/// static quadratic in the input plus `g` times the direction of the step into the hold (+1
-/// up, -1 down); the loop is `2 |g|`, the gap between levels reached from below and from
-/// above at equal input. The quadratic takes a scale, an offset or a curvature of the static
-/// map, which do not depend on the direction.
+/// reached each way): the residual's mean over each hold's second half (settled), fitted by
+/// least squares to a static quadratic in the input plus `g` times the direction of the step
+/// into the hold (+1 up, -1 down); the loop is `2 |g|`, the gap between levels reached from
+/// below and from above at equal input. The quadratic takes a scale, an offset or a curvature
+/// of the static map, which do not depend on the direction.
 fn held_loop_v(d: &Data, r: &[f64]) -> Option<f64> {
     let mut pts: Vec<(f64, f64, f64)> = Vec::new();
     for h in d.holds_of(HELD_LOOP_MIN_S) {

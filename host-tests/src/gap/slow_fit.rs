@@ -13,7 +13,7 @@
 
 use super::catalogue::{self, SlowParams};
 use super::constants::{
-    DRIFT_KNEES, DRIFT_REFINE_PASSES, DRIFT_REFINE_TOL_V2, DRIFT_TAU_MAX_RECORDS, SETTLE_S,
+    DRIFT_KNEES, DRIFT_REFINE_ITERATIONS, DRIFT_REFINE_TOL_V2, DRIFT_TAU_MAX_RECORDS, SETTLE_S,
 };
 use super::data::{Data, sim};
 use super::everett::{self, HYST_COLS, HYST_FIT_COLS, HystFit};
@@ -846,25 +846,12 @@ fn fit_drift_poly(
     let nf = fixed.len();
     let np = 6 + nf;
     let nd = 6 * nk;
-    // The fixed columns' block is the same for every knee and, but for the sensor gain's
-    // products, the regressors' own Gram matrix (computed once, and kept for the round's
-    // solve). Per knee only the six drift columns' products with everything.
-    let g_in = x.gram.get_or_init(|| input_gram(x));
-    let mut g_ff = DMatrix::<f64>::from_fn(nf, nf, |i, j| {
-        if fixed[i] == COL_SGAIN || fixed[j] == COL_SGAIN {
-            0.0
-        } else {
-            g_in[(fixed[i], fixed[j])]
-        }
-    });
-    let tp = target_products(data, y0, x);
-    let b_f = DVector::<f64>::from_fn(nf, |i, _| tp.b[fixed[i]]);
-    if let Some(i) = fixed.iter().position(|&c| c == COL_SGAIN) {
-        for (j, &cj) in fixed.iter().enumerate() {
-            g_ff[(i, j)] = tp.g_s[cj];
-            g_ff[(j, i)] = tp.g_s[cj];
-        }
-    }
+    // The fixed columns' block is the same for every knee: the regressors' own Gram matrix
+    // with this `y0`'s sensor-gain row (computed once, and kept for the round's solve). Per
+    // knee only the six drift columns' products with everything.
+    let (g, b) = target_gram(data, y0, x);
+    let g_ff = DMatrix::<f64>::from_fn(nf, nf, |i, j| g[(fixed[i], fixed[j])]);
+    let b_f = DVector::<f64>::from_fn(nf, |i, _| b[fixed[i]]);
     let mut g_d = vec![DMatrix::<f64>::zeros(6, np); nk];
     let mut b_d = vec![DVector::<f64>::zeros(6); nk];
     for (r, d) in data.iter().enumerate() {
@@ -1061,19 +1048,7 @@ fn fit_slow_linear(
     set: &[&str],
     start: Option<[f64; 3]>,
 ) -> Option<SlowParams> {
-    // Gram matrix of all columns and the target: the input-only part is the regressors' own
-    // (computed once), the sensor gain's column (`y0`) and the target are this `y0`'s (kept
-    // for the few last).
-    let mut g = x.gram.get_or_init(|| input_gram(x)).clone();
-    let tp = target_products(data, y0, x);
-    let b = &tp.b;
-    for k in 0..N_COLS {
-        if k != COL_SGAIN {
-            g[(k, COL_SGAIN)] += tp.g_s[k];
-            g[(COL_SGAIN, k)] += tp.g_s[k];
-        }
-    }
-    g[(COL_SGAIN, COL_SGAIN)] += tp.g_s[COL_SGAIN];
+    let (g, b) = target_gram(data, y0, x);
     let solve = |idx: &[usize], warm: Option<&[bool]>| -> Option<(Vec<f64>, f64)> {
         let p = idx.len();
         let mut a = DMatrix::<f64>::zeros(p, p);
@@ -1136,7 +1111,7 @@ fn fit_slow_linear(
             .count()
             .max(3);
         let grid = catalogue::DRIFT_TAU_GRID_S;
-        let problem = DriftProblem::new(data, y0, x, &fixed, &g, b, usize::MAX);
+        let problem = DriftProblem::new(data, y0, x, &fixed, &g, &b, usize::MAX);
         // A refit from earlier time constants (the structural round) starts there: the grid
         // is for a fit from nothing.
         let (taus0, beta_grid) = if let Some(t0) = start {
@@ -1243,7 +1218,7 @@ fn fit_slow_linear(
         let mut taus = taus0;
         // The search evaluates on evenly thinned rows (DRIFT_SEARCH_ROWS a record), the final
         // solve on all of them.
-        let search = DriftProblem::new(data, y0, x, &fixed_search, &g, b, DRIFT_SEARCH_ROWS);
+        let search = DriftProblem::new(data, y0, x, &fixed_search, &g, &b, DRIFT_SEARCH_ROWS);
         // The searches' and the final solve's first active-set solves start from the grid's
         // best solution's positive set (the lags free): the same optimum within the solver's
         // tolerance, fewer changes of the set than from none.
@@ -1280,8 +1255,8 @@ fn fit_slow_linear(
             }
         };
         // The valley is narrow (a shorter first lag and a play operator of small threshold
-        // trade against each other): coordinate descent zig-zags down it (it used all of
-        // DRIFT_REFINE_PASSES on the demo's fits, 500-560 evaluations each). So after one wide
+        // trade against each other): coordinate descent zig-zags down it (it used all of its
+        // 12 passes on the demo's fits, 500-560 evaluations each). So after one wide
         // coordinate pass (a fit from nothing: the grid's best may sit a grid step off), a
         // damped Newton step in log tau ([`newton_step`]) moves the three together; where it
         // cannot (a difference point outside the bounds or past a gain of 1, no damping that
@@ -1352,7 +1327,7 @@ fn fit_slow_linear(
         // The log time constants kept beside `taus`, so that the parts of a Newton step's
         // points are found again by the next (`exp(ln(tau))` need not give `tau` back).
         let mut lt = taus.map(f64::ln);
-        for _ in 0..DRIFT_REFINE_PASSES {
+        for _ in 0..DRIFT_REFINE_ITERATIONS {
             let last = cur_val;
             match newton_step(&at_log, lt, cur_val) {
                 Newton::Moved(l, v) => (lt, taus, cur_val) = (l, l.map(f64::exp), v),
@@ -1380,6 +1355,24 @@ fn fit_slow_linear(
         let (beta, _) = solve(&fixed, None)?;
         Some(descale(unpack(&fixed, &beta, None)))
     }
+}
+
+/// The weighted Gram matrix of all of `x`'s columns and their products with the target, for
+/// the model without slow effects `y0`: the input-only part is the regressors' own (computed
+/// once), the sensor gain's row and the target's products are this `y0`'s
+/// ([`target_products`], kept for the few last).
+fn target_gram(data: &[Data], y0: &[Vec<f64>], x: &SlowRegressors) -> (DMatrix<f64>, DVector<f64>) {
+    let mut g = x.gram.get_or_init(|| input_gram(x)).clone();
+    let tp = target_products(data, y0, x);
+    // (The kept Gram matrix's sensor-gain row and column are zero.)
+    for k in 0..N_COLS {
+        if k != COL_SGAIN {
+            g[(k, COL_SGAIN)] += tp.g_s[k];
+            g[(COL_SGAIN, k)] += tp.g_s[k];
+        }
+    }
+    g[(COL_SGAIN, COL_SGAIN)] += tp.g_s[COL_SGAIN];
+    (g, tp.b.clone())
 }
 
 /// The [`TargetProducts`] of `x` for the model without slow effects `y0` (kept in `x` for

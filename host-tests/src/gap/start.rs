@@ -14,10 +14,11 @@
 //! stage's response to it fitted over the head), and the candidate that lowers the residual
 //! power the most is taken; on a single record the best [`START_REFITTED`] are taken, each
 //! with its excursions from the first input scaled to the depth that lowers it most
-//! ([`START_SCALE`]: the candidates are a coarse grid). The hysteresis basis is then recomputed from that memory
-//! and the slow effects refitted with it (on a single record for each of them, the one that
-//! leaves the least kept); the result is kept only if every record's residual is no worse
-//! and the total is lower. Two rounds (the refitted table can prefer another start).
+//! ([`START_SCALE`]: the candidates are a coarse grid). The hysteresis basis is then
+//! recomputed from that memory and the slow effects refitted with it (on a single record for
+//! each of them, the one that leaves the least kept); the result is kept only if every
+//! record's residual is no worse and the total is lower. Two rounds (the refitted table can
+//! prefer another start).
 //!
 //! # What it trades
 //! One start memory for all records (the records of one session start from the same rest, as
