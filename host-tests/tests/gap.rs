@@ -626,10 +626,11 @@ fn diagnose_from_thesis_linear(truth: &ModelFile) -> gap::Diagnosis {
 /// step left 121.5 mV (48x the floor) and a `nonlinear-gain` and a -356 mV `offset` the truth
 /// lacks took it to 36.2 mV (14.4x). The records now choose between that split and one whose
 /// elements leave out their own centre line over the records' span, on eleven bands with
-/// edge relays (`everett::CentreLine`): they choose `Span`, and hysteresis alone ends at
-/// 5.73 mV, 2.28x the floor. Asserted: hysteresis alone named, final within 3x the floor (the
-/// issue's 2x is not met; 3x keeps the measured figure's margin for the noise seed and fails
-/// on the old 14x).
+/// edge relays (`everett::CentreLine`): they choose `Span`, and hysteresis alone ended at
+/// 5.73 mV, 2.28x the floor, until that split's elements were cut along the span's triangle
+/// (session 19: the relays with a threshold beyond the records' inputs in columns of their
+/// own): 2.52 mV, 1.00x. Asserted: hysteresis alone named, final within 1.5x the floor (the
+/// margin is the noise seed's; fails on the 2.28x before).
 #[test]
 fn the_thesis_table_alone_is_fitted_near_the_floor() {
     let mut truth = ModelFile::built_in("thesis-full").unwrap();
@@ -641,7 +642,7 @@ fn the_thesis_table_alone_is_fitted_near_the_floor() {
     println!("{}", d.table());
     assert_eq!(d.named, vec!["hysteresis".to_string()]);
     assert!(
-        d.final_rms_v <= 3.0 * d.noise_floor_v,
+        d.final_rms_v <= 1.5 * d.noise_floor_v,
         "final {:.2} mV, {:.1}x the floor",
         1e3 * d.final_rms_v,
         d.final_rms_v / d.noise_floor_v
@@ -673,15 +674,15 @@ fn assert_thesis_slow_effects_named(d: &gap::Diagnosis) {
 }
 
 /// The full thesis stage (`thesis-full`: Everett hysteresis, drift with its K(u), K'(u), slew
-/// limit, saturation, 2.5 mV noise) diagnosed from `thesis-linear`. Its table is fitted only
-/// to 2.3x the floor even alone (`the_thesis_table_alone_is_fitted_near_the_floor`), so the
-/// residual does not reach the floor, but the three slow effects must be named and kept, no
-/// effect the truth lacks named, and the gap must shrink: measured 663 mV to 8.1 mV (82x,
-/// 3.2x the floor) with drift, hysteresis, nonlinear-gain and the truth's slew limit (the
-/// records choose the `Span` split of the basis, held levels tell the K'(u) curvature from a
-/// scale error, `select::held_level_error`, and the drift's K(u) is held above a fitted
-/// knee, as the truth's is above 6 V). Before the knee (session 15): 12.46 mV, 4.97x the
-/// floor; before the two splits: 42.1 mV, 16.8x, with a `sensor-gain` the truth lacks.
+/// limit, saturation, 2.5 mV noise) diagnosed from `thesis-linear`: the three slow effects
+/// must be named and kept, no effect the truth lacks named, and the gap must shrink to the
+/// floor: measured 663 mV to 2.56 mV (259x, 1.02x the floor) with drift, hysteresis,
+/// nonlinear-gain and the truth's slew limit (the records choose the `Span` split of the
+/// basis, held levels tell the K'(u) curvature from a scale error,
+/// `select::held_level_error`, and the drift's K(u) is held above a fitted knee, as the
+/// truth's is above 6 V). Before the span's triangle and the slow effects' last refit
+/// (session 19): 8.1 mV, 3.2x the floor; before the knee (session 15): 12.46 mV, 4.97x;
+/// before the two splits: 42.1 mV, 16.8x, with a `sensor-gain` the truth lacks.
 #[test]
 fn full_thesis_stage_names_its_slow_effects() {
     let truth = ModelFile::built_in("thesis-full").unwrap();
@@ -698,22 +699,51 @@ fn full_thesis_stage_names_its_slow_effects() {
     // Issue #12 asks for drift, hysteresis and nonlinear-gain: the catalogue's split (the
     // table the loop about the base model's reversible map, `nonlinear-gain` the centre line's
     // curvature, `everett::HYST_FIT_REVERSIBLE`). Asserted: those three named, and a cut of
-    // the residual of at least 10x (measured 82x, to 3.2x the floor; 15.8x with one split of
-    // the basis; the play-sum form cut 5.4x; fitting the bands' reversible slopes too cut
-    // 14.8x but took K'(u) into the table and never named `nonlinear-gain`).
+    // the residual of at least 10x (measured 259x, to 1.02x the floor; 82x before session 19;
+    // 15.8x with one split of the basis; the play-sum form cut 5.4x; fitting the bands'
+    // reversible slopes too cut 14.8x but took K'(u) into the table and never named
+    // `nonlinear-gain`).
     assert_thesis_slow_effects_named(&d);
     assert!(
         d.final_rms_v * 10.0 <= base_rms,
         "cut only {:.1}x",
         base_rms / d.final_rms_v
     );
-    // Measured 3.2x (the 150 s records of five seeds: 2.55-2.59x); 4x leaves room for the
-    // noise seed and fails on the 4.97x before the drift's knee.
+    // Issue #12's figure for the 150 s records (`thesis_full_150_s_records_end_near_the_floor`)
+    // holds on these 40 s ones too: measured 1.02x; fails on the 3.2x before session 19.
     assert!(
-        d.final_rms_v <= 4.0 * d.noise_floor_v,
+        d.final_rms_v <= 1.5 * d.noise_floor_v,
         "final {:.1}x the floor",
         d.final_rms_v / d.noise_floor_v
     );
+}
+
+/// Issue #12's requirement on the full thesis stage: its identification records (150 s slow
+/// record, `piezo synth --model thesis-full --protocol identification --seconds 150`, noise
+/// seeds 1-5) diagnosed from `thesis-linear` name drift, hysteresis and nonlinear-gain, no
+/// effect the stage lacks, and end within 1.5x the floor. Measured 1.11-1.12x with the
+/// stage's slew limit named too (session 19; 2.55-2.59x before the span's triangle and the
+/// slow effects' last refit, each of which alone left it there). These records are the ones
+/// the session's change was measured on, so this guards the figure; the hidden-effect and
+/// families suites are the evidence that it is no fit to them alone.
+#[test]
+fn thesis_full_150_s_records_end_near_the_floor() {
+    let base = ModelFile::built_in("thesis-linear").unwrap();
+    for seed in 1..=5u64 {
+        let data: Vec<Data> = protocol::synth_identification("thesis-full", seed, None, 150.0)
+            .unwrap()
+            .into_iter()
+            .map(|(tag, rec)| Data::from_record(&format!("{tag}.csv"), rec).unwrap())
+            .collect();
+        let d = diagnose(&base, &data, &Options::default()).unwrap();
+        let ratio = d.final_rms_v / d.noise_floor_v;
+        println!(
+            "seed {seed}: named {:?}, final {ratio:.2}x the floor",
+            d.named
+        );
+        assert_thesis_slow_effects_named(&d);
+        assert!(ratio <= 1.5, "seed {seed}: final {ratio:.2}x the floor");
+    }
 }
 
 /// One 10 s record at 5 kHz of a 1 Hz sine over 0-9 V (the issue's real-record protocol) of

@@ -48,6 +48,21 @@
 //! table's four slopes cannot take (a stage's K'(u) and its Everett table are one static map
 //! to any record: the workflow says so in GAP.md rather than guess).
 //!
+//! # The span split's triangle (session 19)
+//! The [`CentreLine::Span`] split is the form of a stage whose table ends at the records'
+//! extremes (the thesis' table over its 0..10 V protocol). Its loop elements hold only the
+//! relays **inside the span's triangle**, both thresholds within the records' span
+//! (`lo + r <= c <= hi - r`); the relays of each radius with a
+//! threshold beyond the records' inputs (below `lo`, or else above `hi`) make two columns
+//! of their own ([`out_col`]), which the band penalty does not tie to the others. Before,
+//! each band's element held its relays of both kinds under one weight, so a relay below the
+//! records' lowest input (which switches on once and stays on, or stays as the start memory
+//! left it) moved with the loop's relays of its band: on the thesis' table the ascending
+//! curve from the records' bottom could not be fitted (2.55-2.59x the floor on the 150 s
+//! records). The elements with no relay inside the triangle are left out of the solve
+//! ([`CentreLine::fits`]), so the split has fewer columns than before (the gap bench
+//! 9.1 s -> 7.0 s). The [`CentreLine::Band`] split is unchanged.
+//!
 //! # Resolution and regulariser
 //! Radii: [`HYST_RADII`] at odd multiples of half the table's grid interval ([`radius_v`]:
 //! the basis follows the table's own resolution instead of a fixed list of radii);
@@ -102,9 +117,13 @@ pub const EDGE_TENT_INTERVALS: usize = 4;
 /// Edge-relay columns: [`EDGE_TENTS`] at the bottom of the span, then as many at its top.
 pub const HYST_EDGE_COLS: usize = 2 * EDGE_TENTS;
 
-/// Columns whose weights are kept non-negative (densities of relays): the loop columns and
-/// the edge columns.
-pub const HYST_NONNEG_COLS: usize = HYST_LOOP_COLS + HYST_EDGE_COLS;
+/// Columns of the relays outside the span's triangle ([`CentreLine::Span`] only), two per
+/// radius ([`out_col`]).
+pub const HYST_OUT_COLS: usize = 2 * HYST_RADII;
+
+/// Columns whose weights are kept non-negative (densities of relays): the loop columns, the
+/// edge columns and the outside columns.
+pub const HYST_NONNEG_COLS: usize = HYST_LOOP_COLS + HYST_EDGE_COLS + HYST_OUT_COLS;
 
 /// Columns of the basis: the loop columns, the edge columns, then one reversible column per
 /// band ([`rev_col`]).
@@ -119,6 +138,28 @@ pub const fn rev_col(k: usize) -> usize {
 /// Column index of edge tent `k` at the bottom (`top == false`) or top of the span.
 pub const fn edge_col(top: bool, k: usize) -> usize {
     HYST_LOOP_COLS + if top { EDGE_TENTS } else { 0 } + k
+}
+
+/// Column index of radius `i`'s relays outside the span's triangle: those whose lower
+/// threshold lies below the records' lowest input (`top == false`), or else whose upper one
+/// lies above their highest (their centres: below `lo + r`, or else above `hi - r`).
+pub const fn out_col(top: bool, i: usize) -> usize {
+    HYST_LOOP_COLS + HYST_EDGE_COLS + 2 * i + top as usize
+}
+
+/// The group of basis column `c` a search keeps or leaves whole: a loop or outside column's
+/// radius; the edge columns in two groups (bottom, top) after the radii, the reversible ones
+/// each its own.
+pub const fn radius_group(c: usize) -> usize {
+    if c < HYST_LOOP_COLS {
+        c / HYST_BANDS
+    } else if c < HYST_LOOP_COLS + HYST_EDGE_COLS {
+        HYST_RADII + (c - HYST_LOOP_COLS) / EDGE_TENTS
+    } else if c < HYST_NONNEG_COLS {
+        (c - HYST_LOOP_COLS - HYST_EDGE_COLS) / 2
+    } else {
+        HYST_RADII + 2 + (c - HYST_NONNEG_COLS)
+    }
 }
 
 /// Are the reversible slopes of the bands fitted with the loop (`false`: their columns stay
@@ -156,7 +197,8 @@ pub const HYST_BAND_SMOOTH: f64 = 0.1;
 /// * [`CentreLine::Span`]: each element less its own centre line over the records' span (the
 ///   mean of its major loop's rising and falling branches between the records' extremes): the
 ///   loop of a table whose centre line over the records is straight, as the thesis' table's
-///   is over its 0..10 V (a uniform density over the Preisach triangle). Measured with the
+///   is over its 0..10 V (a uniform density over the Preisach triangle). Its elements are cut
+///   along the span's triangle (module doc, "The span split's triangle"). Measured with the
 ///   basis alone on that table's static output over the identification protocol's slow record:
 ///   `Band` 14.5 mV, `Span` 0.3 mV; on two PI truths over a 1 Hz sine, `Band` 0.5 and 2.1 mV,
 ///   `Span` 346 and 273 mV. Neither split serves both families.
@@ -208,7 +250,8 @@ impl CentreLine {
     /// reversible ones if [`HYST_FIT_REVERSIBLE`].
     pub const fn fits(self, c: usize) -> bool {
         if c < HYST_LOOP_COLS {
-            c % HYST_BANDS < self.bands()
+            let (i, k) = (c / HYST_BANDS, c % HYST_BANDS);
+            k < self.bands() && (!self.edges() || span_inside(i, k))
         } else if c < HYST_NONNEG_COLS {
             self.edges()
         } else {
@@ -219,6 +262,23 @@ impl CentreLine {
 
 /// Grid intervals of the table.
 const INTERVALS: usize = GRID_NODES - 1;
+
+/// Does loop element (radius `i`, band `k`) of the [`CentreLine::Span`] split have relays
+/// inside the span's triangle ([`element_centres`])? In half grid intervals from the table's
+/// bottom: band `k` holds the centres `8k..8k + 8`, the triangle those from `2 EDGE_NODE +
+/// 2i + 1` to `2 (INTERVALS - EDGE_NODE) - 2i - 1`.
+const fn span_inside(i: usize, k: usize) -> bool {
+    let per = 2 * (INTERVALS / HYST_BANDS_SPAN);
+    let (b0, b1) = (per * k, per * (k + 1));
+    let (c0, c1) = (2 * EDGE_NODE + 2 * i + 1, 2 * (INTERVALS - EDGE_NODE));
+    if c1 < 2 * i + 1 {
+        return false;
+    }
+    let c1 = c1 - 2 * i - 1;
+    let lo = if b0 > c0 { b0 } else { c0 };
+    let hi = if b1 < c1 { b1 } else { c1 };
+    lo < hi
+}
 const _: () = assert!(INTERVALS.is_multiple_of(HYST_BANDS_BAND));
 const _: () = assert!(INTERVALS.is_multiple_of(HYST_BANDS_SPAN));
 const _: () = assert!(HYST_BANDS_BAND <= HYST_BANDS && HYST_BANDS_SPAN <= HYST_BANDS);
@@ -498,17 +558,15 @@ pub fn columns(
     let mut out = vec![vec![0.0; rows.len()]; HYST_COLS];
     // Each element's table runs over the whole record (a 150 s record at 1 kHz and the span
     // split's 242 elements: 0.7 s on one core), so the elements are shared out over the cores.
-    let elements: Vec<(usize, usize)> = (0..HYST_RADII)
-        .flat_map(|i| (0..form.bands()).map(move |k| (i, k)))
-        .collect();
-    let cols = crate::util::par_map(&elements, |&(i, k)| {
-        let (e, rev) = element(range, i, k, form);
+    let elements = loop_elements(range, form);
+    let cols = crate::util::par_map(&elements, |&(_, i, centres)| {
+        let (e, rev) = element(range, i, centres, form);
         let mut c = vec![0.0; rows.len()];
         table_column(&e, range, &start, u_v, rows, rev, &mut c);
         c
     });
-    for (&(i, k), c) in elements.iter().zip(cols) {
-        out[col(i, k)] = c;
+    for (&(c_at, _, _), c) in elements.iter().zip(cols) {
+        out[c_at] = c;
     }
     // The edge relays enter as a relay density >= 0 on the span's edges, their reversible part
     // not taken out (their weights move the table's centre line near the span's ends, where a
@@ -553,17 +611,72 @@ const CENTRE_POINTS_PER_INTERVAL: usize = 8;
 fn element(
     range: (f64, f64),
     i: usize,
-    k: usize,
+    centres: (f64, f64),
     form: CentreLine,
 ) -> (Vec<f32>, Box<dyn Fn(f64) -> f64>) {
     let r = radius_v(range, i);
-    let band = band_v(range, k, form.bands());
-    let e = grid(range, |a, b| t_rk(a, b, r, band, range));
+    let e = grid(range, |a, b| t_rk(a, b, r, centres, range));
     let rev: Box<dyn Fn(f64) -> f64> = match form {
-        CentreLine::Band => Box::new(move |u: f64| in_band(u, band, range)),
+        CentreLine::Band => Box::new(move |u: f64| in_band(u, centres, range)),
         CentreLine::Span => centre_line(&e, range),
     };
     (e, rev)
+}
+
+/// The records' span on the table's grid ([`CentreLine::Span`]): nodes `EDGE_NODE` and
+/// `INTERVALS - EDGE_NODE`, volts.
+fn span_v(range: (f64, f64)) -> (f64, f64) {
+    (
+        node_v(range, EDGE_NODE),
+        node_v(range, INTERVALS - EDGE_NODE),
+    )
+}
+
+/// The relay centres of loop element (radius `i`, band `k`): the band's, and for the
+/// [`CentreLine::Span`] split only those inside the span's triangle (both thresholds within
+/// the records' span, `lo + r <= c <= hi - r`; empty where [`span_inside`] is false).
+fn element_centres(range: (f64, f64), i: usize, k: usize, form: CentreLine) -> (f64, f64) {
+    let band = band_v(range, k, form.bands());
+    if !form.edges() {
+        return band;
+    }
+    let r = radius_v(range, i);
+    let (lo, hi) = span_v(range);
+    let c0 = band.0.max(lo + r);
+    (c0, band.1.min(hi - r).max(c0))
+}
+
+/// The relay centres of radius `i` outside the span's triangle ([`out_col`]): below
+/// `lo + r` (a lower threshold below the records' lowest input), or else above `hi - r` (an
+/// upper threshold above their highest), within the table's range. With the triangle's
+/// elements they cover the range once.
+fn out_centres(range: (f64, f64), i: usize, top: bool) -> (f64, f64) {
+    let r = radius_v(range, i);
+    let (lo, hi) = span_v(range);
+    let split = (lo + r).min(range.1);
+    if top {
+        ((hi - r).max(split), range.1)
+    } else {
+        (range.0, split)
+    }
+}
+
+/// The loop elements split `form` fits ([`CentreLine::fits`]): column, radius index and
+/// relay centres of each.
+fn loop_elements(range: (f64, f64), form: CentreLine) -> Vec<(usize, usize, (f64, f64))> {
+    let mut out: Vec<(usize, usize, (f64, f64))> = (0..HYST_RADII)
+        .flat_map(|i| (0..form.bands()).map(move |k| (i, k)))
+        .filter(|&(i, k)| form.fits(col(i, k)))
+        .map(|(i, k)| (col(i, k), i, element_centres(range, i, k, form)))
+        .collect();
+    if form.edges() {
+        for i in 0..HYST_RADII {
+            for top in [false, true] {
+                out.push((out_col(top, i), i, out_centres(range, i, top)));
+            }
+        }
+    }
+    out
 }
 
 /// The centre line over the records' span (nodes `EDGE_NODE` to `INTERVALS - EDGE_NODE`) of
@@ -628,25 +741,27 @@ fn table_column(
 }
 
 /// Adds the smoothness penalty between adjacent bands to the Gram block of the basis, whose
-/// column `c` sits at `at(c)` in `g` (`None`: not in the solve), for a split that uses
-/// `bands` bands ([`CentreLine::bands`]; a radius with fewer in the solve is left alone).
-pub fn add_band_penalty(
-    g: &mut nalgebra::DMatrix<f64>,
-    bands: usize,
-    at: impl Fn(usize) -> Option<usize>,
-) {
+/// column `c` sits at `at(c)` in `g` (`None`: not in the solve): for each radius, between
+/// each two of its loop columns in the solve whose bands are adjacent (the [`CentreLine::Span`]
+/// split's elements with relays inside the span's triangle are a run of adjacent bands), at
+/// [`HYST_BAND_SMOOTH`] times the mean Gram diagonal of the radius' columns in the solve. The
+/// outside columns ([`out_col`]) are not tied to them.
+pub fn add_band_penalty(g: &mut nalgebra::DMatrix<f64>, at: impl Fn(usize) -> Option<usize>) {
     for i in 0..HYST_RADII {
-        let idx: Vec<usize> = (0..HYST_BANDS).filter_map(|k| at(col(i, k))).collect();
-        if idx.len() != bands {
+        let idx: Vec<Option<usize>> = (0..HYST_BANDS).map(|k| at(col(i, k))).collect();
+        let present: Vec<usize> = idx.iter().flatten().copied().collect();
+        if present.len() < 2 {
             continue;
         }
-        let mean = idx.iter().map(|&p| g[(p, p)]).sum::<f64>() / bands as f64;
+        let mean = present.iter().map(|&p| g[(p, p)]).sum::<f64>() / present.len() as f64;
         let lam = HYST_BAND_SMOOTH * mean;
         if lam <= 0.0 || !lam.is_finite() {
             continue;
         }
         for w in idx.windows(2) {
-            let (p, q) = (w[0], w[1]);
+            let (Some(p), Some(q)) = (w[0], w[1]) else {
+                continue;
+            };
             g[(p, p)] += lam;
             g[(q, q)] += lam;
             g[(p, q)] -= lam;
@@ -700,12 +815,10 @@ impl HystFit {
     /// enters the grid as `f(a) - f(b)`, zero at the bottom.
     fn rev_at_bottom_v(&self) -> f64 {
         let mut v = 0.0;
-        for i in 0..HYST_RADII {
-            for k in 0..self.form.bands() {
-                let w = self.weights[col(i, k)];
-                if w != 0.0 {
-                    v += w * element(self.range, i, k, self.form).1(self.range.0);
-                }
+        for (c, i, centres) in loop_elements(self.range, self.form) {
+            let w = self.weights[c];
+            if w != 0.0 {
+                v += w * element(self.range, i, centres, self.form).1(self.range.0);
             }
         }
         v
@@ -717,9 +830,6 @@ impl HystFit {
         let range = self.range;
         let rev_bands: Vec<(f64, f64)> = (0..HYST_BANDS)
             .map(|k| band_v(range, k, HYST_BANDS))
-            .collect();
-        let bands: Vec<(f64, f64)> = (0..self.form.bands())
-            .map(|k| band_v(range, k, self.form.bands()))
             .collect();
         let mut e: Vec<f64> = grid(range, |a, b| {
             let mut v = static_gain * (a - b);
@@ -740,20 +850,18 @@ impl HystFit {
         .map(f64::from)
         .collect();
         // The loop elements: each its grid less its memoryless part `rev(a) - rev(b)`.
-        for i in 0..HYST_RADII {
-            for (k, &band) in bands.iter().enumerate() {
-                let w = self.weights[col(i, k)];
-                if w == 0.0 {
-                    continue;
-                }
-                let r = radius_v(range, i);
-                let (_, rev) = element(range, i, k, self.form);
-                let part = grid(range, |a, b| {
-                    w * (t_rk(a, b, r, band, range) - (rev(a) - rev(b)))
-                });
-                for (x, p) in e.iter_mut().zip(part) {
-                    *x += f64::from(p);
-                }
+        for (c, i, centres) in loop_elements(range, self.form) {
+            let w = self.weights[c];
+            if w == 0.0 {
+                continue;
+            }
+            let r = radius_v(range, i);
+            let (_, rev) = element(range, i, centres, self.form);
+            let part = grid(range, |a, b| {
+                w * (t_rk(a, b, r, centres, range) - (rev(a) - rev(b)))
+            });
+            for (x, p) in e.iter_mut().zip(part) {
+                *x += f64::from(p);
             }
         }
         e.into_iter().map(|x| x as f32).collect()
@@ -837,6 +945,8 @@ mod tests {
             weights[edge_col(false, 1)] = 0.04;
             weights[edge_col(false, 6)] = 0.02;
             weights[edge_col(true, 3)] = 0.03;
+            weights[out_col(false, 5)] = 0.05;
+            weights[out_col(true, 8)] = 0.03;
         }
         let g = params::PLANT_GAIN;
         let fit = HystFit {
@@ -951,6 +1061,47 @@ mod tests {
                 over,
                 "seed {seed}: an invalid fit passed"
             );
+        }
+    }
+
+    /// The span split's relays are the band split's, cut along the span's triangle: for every
+    /// radius, its triangle elements and its two outside columns hold each relay of the
+    /// range once (their Everett functions sum to the bands' at every node), and
+    /// [`span_inside`] names exactly the elements with relays inside the triangle.
+    #[test]
+    fn the_span_split_cuts_the_bands_along_the_triangle() {
+        for range in [(-0.5, 10.5), (1.3, 4.1), (-2.0, 9.0)] {
+            let per = |centres: (f64, f64)| centres.1 - centres.0;
+            for i in 0..HYST_RADII {
+                let r = radius_v(range, i);
+                let mut parts: Vec<(f64, f64)> = (0..HYST_BANDS_SPAN)
+                    .map(|k| element_centres(range, i, k, CentreLine::Span))
+                    .collect();
+                for (k, &part) in parts.iter().enumerate() {
+                    let inside = per(part) > 1e-9 * (range.1 - range.0);
+                    assert_eq!(span_inside(i, k), inside, "{range:?} radius {i} band {k}");
+                }
+                parts.push(out_centres(range, i, false));
+                parts.push(out_centres(range, i, true));
+                let total: f64 = parts.iter().map(|&c| per(c)).sum();
+                assert!(
+                    (total - (range.1 - range.0)).abs() < 1e-9,
+                    "{range:?} radius {i}"
+                );
+                for a_i in 1..GRID_NODES {
+                    for b_i in 0..a_i {
+                        let (a, b) = (node_v(range, a_i), node_v(range, b_i));
+                        let cut: f64 = parts.iter().map(|&c| t_rk(a, b, r, c, range)).sum();
+                        let bands: f64 = (0..HYST_BANDS_SPAN)
+                            .map(|k| t_rk(a, b, r, band_v(range, k, HYST_BANDS_SPAN), range))
+                            .sum();
+                        assert!(
+                            (cut - bands).abs() < 1e-9,
+                            "{range:?} radius {i} at ({a}, {b})"
+                        );
+                    }
+                }
+            }
         }
     }
 

@@ -673,6 +673,41 @@ pub fn diagnose(base: &ModelFile, data: &[Data], opts: &Options) -> anyhow::Resu
         sims = s;
         cur_mse = ms;
     }
+    // Polish: the slow effects refitted together once more with every named effect in place
+    // and the structure search's full rounds (a fast effect named after them, a slew limit,
+    // moves the fast record their fit shares, and the steps' candidates search one round),
+    // kept where no record's residual grows and their sum falls.
+    if !at_floor_now(&cur_mse, &var) {
+        let slow: Vec<&str> = named
+            .iter()
+            .map(String::as_str)
+            .filter(|e| SLOW.contains(e))
+            .collect();
+        if !slow.is_empty()
+            && let Some(m) = refit_slow(&model, &[], data, &slow_x, u_range)
+            && let Ok((s, ms)) = simulate_all(&m, data)
+            && ms.iter().zip(&cur_mse).all(|(a, b)| *a <= *b)
+            && ms.iter().sum::<f64>() < cur_mse.iter().sum::<f64>()
+        {
+            let rms = |v: &[f64]| (v.iter().sum::<f64>() / v.len() as f64).sqrt();
+            steps.push(Step {
+                effect: slow.join("+"),
+                evidence: "the slow effects refitted together with every named effect in place"
+                    .into(),
+                params: serde_json::Map::new(),
+                rms_before_v: rms(&cur_mse),
+                rms_after_v: rms(&ms),
+                record_rms_before_v: cur_mse.iter().map(|m| m.sqrt()).collect(),
+                record_rms_after_v: ms.iter().map(|m| m.sqrt()).collect(),
+                sims: s.clone(),
+                refit: true,
+                removed: false,
+            });
+            model = m;
+            sims = s;
+            cur_mse = ms;
+        }
+    }
     // Swaps (after the radii are refined, and each trial refined the same way): a slow effect
     // the greedy pass named first can stand in for another the records
     // cannot tell from it (without holds, a drift lag's mean over a sine acts as an offset);

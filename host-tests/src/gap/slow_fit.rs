@@ -1200,7 +1200,7 @@ fn fit_slow_linear(
         // four bands of each, so the band penalty stays whole) and every other fixed column;
         // the final solve has them all (the basis' 22 radii x 4 bands would otherwise enter
         // each of the refinement's few hundred solves).
-        let radius_of = |c: usize| (c - COL_HYST) / everett::HYST_BANDS;
+        let radius_of = |c: usize| everett::radius_group(c - COL_HYST);
         let is_hyst = |c: usize| (COL_HYST..COL_HYST + HYST_COLS).contains(&c);
         let used_radii: std::collections::BTreeSet<usize> = fixed
             .iter()
@@ -1723,21 +1723,9 @@ impl Schur {
 }
 
 /// The hysteresis basis' smoothness penalty ([`everett::add_band_penalty`]) on a Gram matrix
-/// whose rows from `at` on are the regressor columns `cols`, for the split whose loop columns
-/// `cols` holds (its bands: the most any radius has in `cols`, as [`fixed_cols`] passes a
-/// split's whole radii or none).
+/// whose rows from `at` on are the regressor columns `cols`.
 fn band_penalty(g: &mut DMatrix<f64>, cols: &[usize], at: usize) {
-    let loop_band = |c: usize| {
-        (COL_HYST..COL_HYST + everett::HYST_LOOP_COLS)
-            .contains(&c)
-            .then(|| (c - COL_HYST) % everett::HYST_BANDS)
-    };
-    let bands = cols
-        .iter()
-        .filter_map(|&c| loop_band(c))
-        .max()
-        .map_or(0, |k| k + 1);
-    everett::add_band_penalty(g, bands, |c| {
+    everett::add_band_penalty(g, |c| {
         cols.iter().position(|&k| k == COL_HYST + c).map(|p| at + p)
     });
 }
