@@ -125,8 +125,8 @@ pub const HYST_OUT_COLS: usize = 2 * HYST_RADII;
 /// edge columns and the outside columns.
 pub const HYST_NONNEG_COLS: usize = HYST_LOOP_COLS + HYST_EDGE_COLS + HYST_OUT_COLS;
 
-/// Columns of the basis: the loop columns, the edge columns, then one reversible column per
-/// band ([`rev_col`]).
+/// Columns of the basis: the loop columns, the edge columns, the outside columns, then one
+/// reversible column per band ([`rev_col`]).
 pub const HYST_COLS: usize = HYST_NONNEG_COLS + HYST_BANDS;
 
 /// Column index of band `k`'s reversible part (`clamp(u, band) - c_k`: a change of the
@@ -246,12 +246,13 @@ impl CentreLine {
     }
 
     /// Is basis column `c` one this split fits: the loop columns of the bands it uses
-    /// ([`Self::bands`]), the edge columns if it has them ([`Self::edges`]), and the
-    /// reversible ones if [`HYST_FIT_REVERSIBLE`].
+    /// ([`Self::bands`]; for the split with edges only those with relays inside the span's
+    /// triangle), the edge and outside columns ([`out_col`]) if it has edges
+    /// ([`Self::edges`]), and the reversible ones if [`HYST_FIT_REVERSIBLE`].
     pub const fn fits(self, c: usize) -> bool {
         if c < HYST_LOOP_COLS {
             let (i, k) = (c / HYST_BANDS, c % HYST_BANDS);
-            k < self.bands() && (!self.edges() || span_inside(i, k))
+            k < self.bands() && (!self.edges() || span_inside(i, k, self.bands()))
         } else if c < HYST_NONNEG_COLS {
             self.edges()
         } else {
@@ -263,12 +264,13 @@ impl CentreLine {
 /// Grid intervals of the table.
 const INTERVALS: usize = GRID_NODES - 1;
 
-/// Does loop element (radius `i`, band `k`) of the [`CentreLine::Span`] split have relays
-/// inside the span's triangle ([`element_centres`])? In half grid intervals from the table's
-/// bottom: band `k` holds the centres `8k..8k + 8`, the triangle those from `2 EDGE_NODE +
-/// 2i + 1` to `2 (INTERVALS - EDGE_NODE) - 2i - 1`.
-const fn span_inside(i: usize, k: usize) -> bool {
-    let per = 2 * (INTERVALS / HYST_BANDS_SPAN);
+/// Does loop element (radius `i`, band `k` of `bands`) of the [`CentreLine::Span`] split have
+/// relays inside the span's triangle ([`element_centres`])? In half grid intervals from the
+/// table's bottom: band `k` holds the centres `per k..per (k + 1)` (`per` twice the band's
+/// intervals), the triangle those from `2 EDGE_NODE + 2i + 1` to
+/// `2 (INTERVALS - EDGE_NODE) - 2i - 1`.
+const fn span_inside(i: usize, k: usize, bands: usize) -> bool {
+    let per = 2 * (INTERVALS / bands);
     let (b0, b1) = (per * k, per * (k + 1));
     let (c0, c1) = (2 * EDGE_NODE + 2 * i + 1, 2 * (INTERVALS - EDGE_NODE));
     if c1 < 2 * i + 1 {
@@ -431,8 +433,7 @@ fn l_k(a: f64, b: f64, band: (f64, f64)) -> f64 {
 /// centred on node `EDGE_NODE + 4 k`, cut to the span `[node EDGE_NODE, node INTERVALS -
 /// EDGE_NODE]`.
 fn edge_tent_integral(x0: f64, x1: f64, k: usize, range: (f64, f64)) -> f64 {
-    let lo = node_v(range, EDGE_NODE);
-    let hi = node_v(range, INTERVALS - EDGE_NODE);
+    let (lo, hi) = span_v(range);
     let h = EDGE_TENT_INTERVALS as f64 * (range.1 - range.0) / INTERVALS as f64;
     let m = node_v(range, EDGE_NODE + EDGE_TENT_INTERVALS * k);
     let x0 = x0.max(lo).max(m - h);
@@ -466,14 +467,14 @@ fn edge_mass(k: usize, range: (f64, f64)) -> f64 {
 fn t_edge(a: f64, b: f64, top: bool, k: usize, range: (f64, f64)) -> f64 {
     let eps = 1e-9 * (range.1 - range.0);
     if top {
-        let hi = node_v(range, INTERVALS - EDGE_NODE);
+        let hi = span_v(range).1;
         if a >= hi - eps {
             edge_tent_integral(b, hi, k, range)
         } else {
             0.0
         }
     } else {
-        let lo = node_v(range, EDGE_NODE);
+        let lo = span_v(range).0;
         if b <= lo + eps {
             edge_tent_integral(lo, a, k, range)
         } else {
@@ -545,8 +546,10 @@ pub fn radius_v(range: (f64, f64), i: usize) -> f64 {
     (2 * i + 1) as f64 * (range.1 - range.0) / (2 * INTERVALS) as f64
 }
 
-/// The loop-only columns at `rows` of a record with inputs `u_v`: for each (radius, band)
-/// the table's response minus the band's reversible part (zero for radii not used).
+/// The basis columns at `rows` of a record with inputs `u_v`: for each loop element the split
+/// fits ([`CentreLine::fits`]: (radius, band) pairs, and the outside columns of the split
+/// with edges) the table's response minus the element's memoryless part, the edge columns,
+/// and the reversible ones (zero for columns the split does not fit).
 pub fn columns(
     u_v: &[f64],
     rows: &[usize],
@@ -557,7 +560,8 @@ pub fn columns(
     let start: Vec<f32> = start_v.iter().map(|&v| v as f32).collect();
     let mut out = vec![vec![0.0; rows.len()]; HYST_COLS];
     // Each element's table runs over the whole record (a 150 s record at 1 kHz and the span
-    // split's 242 elements: 0.7 s on one core), so the elements are shared out over the cores.
+    // split's 164 elements: about 0.5 s on one core), so the elements are shared out over the
+    // cores.
     let elements = loop_elements(range, form);
     let cols = crate::util::par_map(&elements, |&(_, i, centres)| {
         let (e, rev) = element(range, i, centres, form);
@@ -624,7 +628,10 @@ fn element(
 }
 
 /// The records' span on the table's grid ([`CentreLine::Span`]): nodes `EDGE_NODE` and
-/// `INTERVALS - EDGE_NODE`, volts.
+/// `INTERVALS - EDGE_NODE`, volts. They are the records' extremes but where [`hyst_range`]
+/// clamps the range to the amplifier's input range (inputs within the margin of its ends) or
+/// widens a span under 0.9 V: the edge relays and the outside columns ([`out_col`]) then sit
+/// at those nodes, and the records switch some of the relays they hold.
 fn span_v(range: (f64, f64)) -> (f64, f64) {
     (
         node_v(range, EDGE_NODE),
@@ -653,7 +660,7 @@ fn element_centres(range: (f64, f64), i: usize, k: usize, form: CentreLine) -> (
 fn out_centres(range: (f64, f64), i: usize, top: bool) -> (f64, f64) {
     let r = radius_v(range, i);
     let (lo, hi) = span_v(range);
-    let split = (lo + r).min(range.1);
+    let split = lo + r;
     if top {
         ((hi - r).max(split), range.1)
     } else {
@@ -683,8 +690,7 @@ fn loop_elements(range: (f64, f64), form: CentreLine) -> Vec<(usize, usize, (f64
 /// the table with grid `e` over `range`: the mean of its rising branch from the span's bottom
 /// and its falling branch from the span's top, held constant beyond the span.
 fn centre_line(e: &[f32], range: (f64, f64)) -> Box<dyn Fn(f64) -> f64> {
-    let lo = node_v(range, EDGE_NODE);
-    let hi = node_v(range, INTERVALS - EDGE_NODE);
+    let (lo, hi) = span_v(range);
     let n = CENTRE_POINTS_PER_INTERVAL * (INTERVALS - 2 * EDGE_NODE);
     let Ok(t) = HysteresisTable::from_grid(range.0 as f32, range.1 as f32, 0.0, e) else {
         return Box::new(|_| 0.0);
@@ -935,10 +941,11 @@ mod tests {
         let cols = columns(&u, &rows, range, &[], form);
         let mut weights = vec![0.0; HYST_COLS];
         // An asymmetric density: wide operators at the top, narrow ones at the bottom.
-        weights[col(2, 0)] = 0.3;
-        weights[col(6, 1)] = 0.1;
+        // (columns both splits fit: for the span's, (12, 3) is cut by the triangle)
+        weights[col(2, 1)] = 0.3;
+        weights[col(6, 2)] = 0.1;
         weights[col(9, 3)] = 0.08;
-        weights[col(12, 2)] = 0.02;
+        weights[col(12, 3)] = 0.02;
         weights[rev_col(2)] = -0.1;
         weights[rev_col(3)] = 0.05;
         if form.edges() {
@@ -1079,7 +1086,8 @@ mod tests {
                     .collect();
                 for (k, &part) in parts.iter().enumerate() {
                     let inside = per(part) > 1e-9 * (range.1 - range.0);
-                    assert_eq!(span_inside(i, k), inside, "{range:?} radius {i} band {k}");
+                    let told = span_inside(i, k, HYST_BANDS_SPAN);
+                    assert_eq!(told, inside, "{range:?} radius {i} band {k}");
                 }
                 parts.push(out_centres(range, i, false));
                 parts.push(out_centres(range, i, true));

@@ -24,9 +24,10 @@
 //! 6. **Stop** when every record's residual RMS is within [`STOP_FLOOR_RATIO`] of its noise
 //!    floor or no candidate is admissible.
 //! 7. **Final check** (each named effect taken back out, kept only if the residual grows),
-//!    then a **last refit** of the slow effects together with every named effect in place
-//!    (kept where no record's residual grows: a fast effect named after them moves the fast
-//!    record their fit shares), then **swaps** of slow effects the records cannot tell apart.
+//!    then, unless every record is at its floor, a **last refit** of the slow effects
+//!    together with every named effect in place (kept where no record's residual grows and
+//!    their sum falls: a fast effect named after them moves the fast record their fit
+//!    shares), then **swaps** of slow effects the records cannot tell apart.
 //!
 //! # What it trades
 //! The slow effects are fitted by a linear solve on settled samples, the fast ones by a

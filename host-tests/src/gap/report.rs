@@ -113,7 +113,13 @@ impl Diagnosis {
             s.push_str(&format!(
                 "  {}{} per record mV: {:.2?} -> {:.2?}\n",
                 st.effect,
-                if st.removed { " (removed)" } else { "" },
+                if st.removed {
+                    " (removed)"
+                } else if st.refit {
+                    " (refit)"
+                } else {
+                    ""
+                },
                 mv(&st.record_rms_before_v),
                 mv(&st.record_rms_after_v)
             ));

@@ -2,7 +2,9 @@
 //! ([`super::fast_fit`], [`super::slow_fit`]), simulate it on every record, score it (the
 //! per-record Gaussian log-likelihood change with the BIC penalty), add the best admissible
 //! one, repeat until the residual reaches the noise floor; then the final check takes back out
-//! every named effect that does not earn its place ([`super::constants::PRUNE_RATIO`]).
+//! every named effect that does not earn its place ([`super::constants::PRUNE_RATIO`]), the
+//! slow effects are refitted once more with every named effect in place, and the swaps try
+//! each named slow effect's look-alikes (step 7 of the loop).
 
 use super::catalogue::{self, EFFECTS, FAST, SLOW};
 use super::constants::{
@@ -49,6 +51,32 @@ pub struct Step {
     /// The final check took this effect back out.
     #[serde(skip)]
     pub removed: bool,
+}
+
+impl Step {
+    /// A step named `effect` with its `evidence`, from each record's residual mean square
+    /// before and after it and the simulations after it (no parameters, neither a refit nor
+    /// removed: set those fields on the result).
+    fn new(
+        effect: String,
+        evidence: String,
+        mse_before: &[f64],
+        mse_after: &[f64],
+        sims: Vec<Vec<f64>>,
+    ) -> Self {
+        Step {
+            effect,
+            evidence,
+            params: serde_json::Map::new(),
+            rms_before_v: rms_of(mse_before),
+            rms_after_v: rms_of(mse_after),
+            record_rms_before_v: mse_before.iter().map(|m| m.sqrt()).collect(),
+            record_rms_after_v: mse_after.iter().map(|m| m.sqrt()).collect(),
+            sims,
+            refit: false,
+            removed: false,
+        }
+    }
 }
 
 /// The outcome of the workflow.
@@ -110,6 +138,8 @@ impl Diagnosis {
                 "params": s.params,
                 "rms_before_v": s.rms_before_v,
                 "rms_after_v": s.rms_after_v,
+                "refit": s.refit,
+                "removed": s.removed,
             })).collect::<Vec<_>>(),
             "noise_floor_v": self.noise_floor_v,
             "final_rms_v": self.final_rms_v,
@@ -484,8 +514,6 @@ pub fn diagnose(base: &ModelFile, data: &[Data], opts: &Options) -> anyhow::Resu
         else {
             break;
         };
-        let rms_before = (cur_mse.iter().sum::<f64>() / cur_mse.len() as f64).sqrt();
-        let rms_after = (best.mse.iter().sum::<f64>() / best.mse.len() as f64).sqrt();
         let p = catalogue::params_of(&best.model, &best.effect);
         let mut params = serde_json::Map::new();
         for (k, v) in &p {
@@ -501,16 +529,15 @@ pub fn diagnose(base: &ModelFile, data: &[Data], opts: &Options) -> anyhow::Resu
             if best.k == 1 { "" } else { "s" }
         );
         steps.push(Step {
-            effect: best.effect.clone(),
-            evidence,
             params,
-            rms_before_v: rms_before,
-            rms_after_v: rms_after,
-            record_rms_before_v: cur_mse.iter().map(|m| m.sqrt()).collect(),
-            record_rms_after_v: best.mse.iter().map(|m| m.sqrt()).collect(),
-            sims: best.sims.clone(),
             refit: best.refit,
-            removed: false,
+            ..Step::new(
+                best.effect.clone(),
+                evidence,
+                &cur_mse,
+                &best.mse,
+                best.sims.clone(),
+            )
         });
         if !named.contains(&best.effect) {
             named.push(best.effect.clone());
@@ -637,8 +664,6 @@ pub fn diagnose(base: &ModelFile, data: &[Data], opts: &Options) -> anyhow::Resu
         if ratio >= bar_e {
             break;
         }
-        let rms_before = (cur_mse.iter().sum::<f64>() / cur_mse.len() as f64).sqrt();
-        let rms_after = (ms.iter().sum::<f64>() / ms.len() as f64).sqrt();
         for e in &unit {
             let with = if unit.len() > 1 {
                 format!(" (as a pair: {})", unit.join(" and "))
@@ -656,16 +681,8 @@ pub fn diagnose(base: &ModelFile, data: &[Data], opts: &Options) -> anyhow::Resu
                 ),
             };
             steps.push(Step {
-                effect: e.clone(),
-                evidence,
-                params: serde_json::Map::new(),
-                rms_before_v: rms_before,
-                rms_after_v: rms_after,
-                record_rms_before_v: cur_mse.iter().map(|m| m.sqrt()).collect(),
-                record_rms_after_v: ms.iter().map(|m| m.sqrt()).collect(),
-                sims: s.clone(),
-                refit: false,
                 removed: true,
+                ..Step::new(e.clone(), evidence, &cur_mse, &ms, s.clone())
             });
         }
         named.retain(|x| !unit.contains(x));
@@ -678,10 +695,11 @@ pub fn diagnose(base: &ModelFile, data: &[Data], opts: &Options) -> anyhow::Resu
     // moves the fast record their fit shares, and the steps' candidates search one round),
     // kept where no record's residual grows and their sum falls.
     if !at_floor_now(&cur_mse, &var) {
-        let slow: Vec<&str> = named
+        // (the set `refit_slow` refits: every slow effect the model has)
+        let slow: Vec<&str> = SLOW
             .iter()
-            .map(String::as_str)
-            .filter(|e| SLOW.contains(e))
+            .copied()
+            .filter(|e| catalogue::present(&model, e))
             .collect();
         if !slow.is_empty()
             && let Some(m) = refit_slow(&model, &[], data, &slow_x, u_range)
@@ -689,19 +707,15 @@ pub fn diagnose(base: &ModelFile, data: &[Data], opts: &Options) -> anyhow::Resu
             && ms.iter().zip(&cur_mse).all(|(a, b)| *a <= *b)
             && ms.iter().sum::<f64>() < cur_mse.iter().sum::<f64>()
         {
-            let rms = |v: &[f64]| (v.iter().sum::<f64>() / v.len() as f64).sqrt();
             steps.push(Step {
-                effect: slow.join("+"),
-                evidence: "the slow effects refitted together with every named effect in place"
-                    .into(),
-                params: serde_json::Map::new(),
-                rms_before_v: rms(&cur_mse),
-                rms_after_v: rms(&ms),
-                record_rms_before_v: cur_mse.iter().map(|m| m.sqrt()).collect(),
-                record_rms_after_v: ms.iter().map(|m| m.sqrt()).collect(),
-                sims: s.clone(),
                 refit: true,
-                removed: false,
+                ..Step::new(
+                    slow.join("+"),
+                    "the slow effects refitted together with every named effect in place".into(),
+                    &cur_mse,
+                    &ms,
+                    s.clone(),
+                )
             });
             model = m;
             sims = s;
@@ -794,25 +808,17 @@ pub fn diagnose(base: &ModelFile, data: &[Data], opts: &Options) -> anyhow::Resu
             })
             .min_by(|a, b| a.6.total_cmp(&b.6));
         if let Some((e, f, set, m, s, ms, sc)) = best {
-            let rms = |v: &[f64]| (v.iter().sum::<f64>() / v.len() as f64).sqrt();
             let mut params = serde_json::Map::new();
             for (k, v) in catalogue::params_of(&m, &f) {
                 params.insert(k, serde_json::json!(v));
             }
+            let evidence = format!(
+                "swapped in for {e}, which these records cannot tell from it (score {:.0} lower)",
+                cur_score - sc
+            );
             steps.push(Step {
-                effect: f.clone(),
-                evidence: format!(
-                    "swapped in for {e}, which these records cannot tell from it (score {:.0} lower)",
-                    cur_score - sc
-                ),
                 params,
-                rms_before_v: rms(&cur_mse),
-                rms_after_v: rms(&ms),
-                record_rms_before_v: cur_mse.iter().map(|m| m.sqrt()).collect(),
-                record_rms_after_v: ms.iter().map(|m| m.sqrt()).collect(),
-                sims: s.clone(),
-                refit: false,
-                removed: false,
+                ..Step::new(f.clone(), evidence, &cur_mse, &ms, s.clone())
             });
             named = set;
             model = m;

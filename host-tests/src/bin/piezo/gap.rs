@@ -5,8 +5,9 @@
 //! Records are CSV ([`host_tests::io::csv`]) or MATLAB v5 `.mat` files
 //! ([`host_tests::io::mat`], variables named by `--vars`, default `t=t,u=u,y=y`). The table
 //! goes to stdout (or one JSON object with `--json`: `{"named", "steps": [{"effect",
-//! "evidence", "params", "rms_before_v", "rms_after_v"}], "noise_floor_v", "final_rms_v"}`), a
-//! progress bar to stderr.
+//! "evidence", "params", "rms_before_v", "rms_after_v", "refit", "removed"}], "noise_floor_v",
+//! "final_rms_v", "unexplained", "cannot_tell", "hysteresis_split"}`), a progress bar to
+//! stderr.
 
 use clap::Args;
 use host_tests::gap::{Options, diagnose, load_data, report};
