@@ -609,9 +609,10 @@ pub fn columns(
 /// interval and eight points follow them to well below the records' noise).
 const CENTRE_POINTS_PER_INTERVAL: usize = 8;
 
-/// Loop element (radius `i`, band `k`): its Everett grid and the memoryless part its column
-/// leaves out (`rev(u)`, zero at the bottom of `range`... or its value there, which the
-/// table's offset carries: [`HystFit::section`]).
+/// Loop element of radius `i` over the relay centres `centres` (a band's, or a part of it:
+/// [`element_centres`], [`out_centres`]): its Everett grid and the memoryless part its column
+/// leaves out (`rev(u)`, the band's `clamp(u, band)` or the element's centre line; its value
+/// at the bottom of `range` is carried by the table's offset: [`HystFit::section`]).
 fn element(
     range: (f64, f64),
     i: usize,
