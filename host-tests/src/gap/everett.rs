@@ -409,7 +409,9 @@ pub const fn col(i: usize, k: usize) -> usize {
 }
 
 /// Band-limited play operator `(r, band)`'s Everett function at `(a, b)` on a table over
-/// `range`: the measure of the centres `c` in the band whose relay, clipped to the range
+/// `range` (`band` the centres it holds: a band, or the part of one an element keeps,
+/// [`element_centres`], [`out_centres`]): the measure of the centres `c` in it whose relay,
+/// clipped to the range
 /// (thresholds `max(c - r, lo)` and `min(c + r, hi)`), lies inside `[b, a]`. Clipped, a relay
 /// near an end of the range still switches within it, so the column stays loop-only there
 /// (unclipped, the relays that would need an input beyond the range never switch and leave

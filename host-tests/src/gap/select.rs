@@ -189,7 +189,6 @@ fn cannot_tell(
         .into_iter()
         .filter(|(e, f)| named.iter().any(|n| n == e) && !named.iter().any(|n| n == f))
         .collect();
-    let rms = |v: &[f64]| (v.iter().sum::<f64>() / v.len().max(1) as f64).sqrt();
     pairs
         .into_iter()
         .filter_map(|(e, f)| {
@@ -209,14 +208,14 @@ fn cannot_tell(
                 neither_named: false,
                 named: e.to_string(),
                 alternative: f.to_string(),
-                rms_v: rms(cur_mse),
-                alternative_rms_v: rms(&ms),
+                rms_v: rms_of(cur_mse),
+                alternative_rms_v: rms_of(&ms),
                 why: format!(
                     "no record holds its input for {HOLD_MIN_S} s, and {f} in place of {e} \
                      leaves {:.2} mV against {:.2} mV: record holds (the recommended \
                      protocol) to tell them apart",
-                    1e3 * rms(&ms),
-                    1e3 * rms(cur_mse)
+                    1e3 * rms_of(&ms),
+                    1e3 * rms_of(cur_mse)
                 ),
             })
         })
@@ -514,11 +513,7 @@ pub fn diagnose(base: &ModelFile, data: &[Data], opts: &Options) -> anyhow::Resu
         else {
             break;
         };
-        let p = catalogue::params_of(&best.model, &best.effect);
-        let mut params = serde_json::Map::new();
-        for (k, v) in &p {
-            params.insert(k.clone(), serde_json::json!(v));
-        }
+        let params = params_json(&best.model, &best.effect);
         let words = sigs.describe(&best.effect, &best.model);
         let evidence = format!(
             "{}; explains {:.0} % of the residual power above the noise floor; score {:.0} (BIC, {} parameter{})",
@@ -556,13 +551,10 @@ pub fn diagnose(base: &ModelFile, data: &[Data], opts: &Options) -> anyhow::Resu
             sims = f.sims;
             cur_mse = f.mse;
             if let Some(s) = steps.last_mut() {
-                s.rms_after_v = (cur_mse.iter().sum::<f64>() / cur_mse.len() as f64).sqrt();
+                s.rms_after_v = rms_of(&cur_mse);
                 s.record_rms_after_v = cur_mse.iter().map(|m| m.sqrt()).collect();
                 s.sims = sims.clone();
-                s.params.clear();
-                for (k, v) in catalogue::params_of(&model, "hysteresis") {
-                    s.params.insert(k, serde_json::json!(v));
-                }
+                s.params = params_json(&model, "hysteresis");
             }
         }
     }
@@ -695,12 +687,8 @@ pub fn diagnose(base: &ModelFile, data: &[Data], opts: &Options) -> anyhow::Resu
     // moves the fast record their fit shares, and the steps' candidates search one round),
     // kept where no record's residual grows and their sum falls.
     if !at_floor_now(&cur_mse, &var) {
-        // (the set `refit_slow` refits: every slow effect the model has)
-        let slow: Vec<&str> = SLOW
-            .iter()
-            .copied()
-            .filter(|e| catalogue::present(&model, e))
-            .collect();
+        // (the set `refit_slow` refits)
+        let slow = present_slow(&model);
         if !slow.is_empty()
             && let Some(m) = refit_slow(&model, &[], data, &slow_x, u_range)
             && let Ok((s, ms)) = simulate_all(&m, data)
@@ -808,10 +796,7 @@ pub fn diagnose(base: &ModelFile, data: &[Data], opts: &Options) -> anyhow::Resu
             })
             .min_by(|a, b| a.6.total_cmp(&b.6));
         if let Some((e, f, set, m, s, ms, sc)) = best {
-            let mut params = serde_json::Map::new();
-            for (k, v) in catalogue::params_of(&m, &f) {
-                params.insert(k, serde_json::json!(v));
-            }
+            let params = params_json(&m, &f);
             let evidence = format!(
                 "swapped in for {e}, which these records cannot tell from it (score {:.0} lower)",
                 cur_score - sc
@@ -859,6 +844,22 @@ pub fn diagnose(base: &ModelFile, data: &[Data], opts: &Options) -> anyhow::Resu
         cannot_tell,
         centre_line,
     })
+}
+
+/// The slow effects `m` has, in the catalogue's order (the set [`refit_slow`] refits).
+fn present_slow(m: &ModelFile) -> Vec<&'static str> {
+    SLOW.iter()
+        .copied()
+        .filter(|e| catalogue::present(m, e))
+        .collect()
+}
+
+/// The parameters of `effect` in `m`, as a step's JSON holds them.
+fn params_json(m: &ModelFile, effect: &str) -> serde_json::Map<String, serde_json::Value> {
+    catalogue::params_of(m, effect)
+        .into_iter()
+        .map(|(k, v)| (k, serde_json::json!(v)))
+        .collect()
 }
 
 /// The residual RMS over records of per-record mean squares, volts.
@@ -993,11 +994,7 @@ pub(super) fn refit_slow(
     slow_x: &SlowRegressors,
     u_range: (f64, f64),
 ) -> Option<ModelFile> {
-    let mut set: Vec<&str> = SLOW
-        .iter()
-        .copied()
-        .filter(|e| catalogue::present(m, e))
-        .collect();
+    let mut set = present_slow(m);
     for e in extra {
         if !set.contains(e) {
             set.push(e);
@@ -1038,11 +1035,7 @@ fn candidates(
     named: &[String],
 ) -> anyhow::Result<Vec<Candidate>> {
     // Slow effects: one joint solve per candidate set.
-    let present_slow: Vec<&str> = SLOW
-        .iter()
-        .copied()
-        .filter(|e| catalogue::present(model, e))
-        .collect();
+    let present_slow = present_slow(model);
     // The model without slow effects on every record (the slow fits' base), simulated in the
     // pool below as its first job (the slow records' simulation is a core's work for a while).
     let base0 = catalogue::without_slow(model);
