@@ -8,7 +8,10 @@
 //! workflow does not fit:
 //! * `hysteresis`: Bouc-Wen, Duhem (Coleman-Hodgdon), a Preisach plane with a Gaussian or
 //!   Lorentzian density (asymmetric), or Prandtl-Ishlinskii with random radii; loop 5-15 % of
-//!   the span; half the cases start after earlier excursions (not on a major curve);
+//!   the span; half the cases start after earlier excursions (not on a major curve). Scaled
+//!   to that width, some truths move the position against the input just after a reversal
+//!   (`Hysteresis::min_slope` below zero), which no Everett table can: the per-form table
+//!   counts them apart (`hyst-branch:against-input`, else `hyst-branch:monotone`);
 //! * `drift`: log creep or fractional (power-law `t^a`, a = 0.05-0.3) creep, 2-8 % of a step
 //!   at 10 s;
 //! * `nonlinear-gain`: a static map of tanh, exp or softplus shape (not a polynomial), with the
@@ -120,6 +123,11 @@ impl Case {
             } else {
                 "hyst-start:excursion"
             });
+            v.push(if h.min_slope() < 0.0 {
+                "hyst-branch:against-input"
+            } else {
+                "hyst-branch:monotone"
+            });
         }
         if let Some(c) = &self.creep {
             v.push(c.label());
@@ -135,10 +143,11 @@ impl Case {
         let mut s = format!("{} [{}]", self.protocol.family.name(), self.protocol.desc);
         if let Some(h) = &self.hysteresis {
             s += &format!(
-                "; {:?} loop {:.1} % start {:?}",
+                "; {:?} loop {:.1} % start {:?} least slope {:.2}",
                 h.form,
                 100.0 * h.share,
-                h.before
+                h.before,
+                h.min_slope()
             );
         }
         if let Some(c) = &self.creep {

@@ -607,6 +607,24 @@ impl Hysteresis {
         h
     }
 
+    /// The least slope of the input plus the hysteresis term along a settled 0-10-0 V cycle
+    /// (0.02 V steps), volts per volt. Below zero the truth's position moves against its
+    /// input just after a reversal (a Duhem or Bouc-Wen loop, or play operators, scaled to a
+    /// wide loop from a narrow one), which no Preisach density (>= 0), and so no Everett
+    /// table the stage accepts, can do: the per-form table counts those truths apart.
+    pub fn min_slope(&self) -> f64 {
+        let mut op = HystOp::new(&self.form, self.table.as_ref(), 0.0);
+        op.step(10.0);
+        op.step(0.0);
+        let up = (0..=500).map(|i| i as f64 * 0.02);
+        let path: Vec<f64> = up.clone().chain(up.rev().skip(1)).collect();
+        let y: Vec<f64> = path.iter().map(|&x| x + self.scale * op.step(x)).collect();
+        path.windows(2)
+            .zip(y.windows(2))
+            .map(|(x, y)| (y[1] - y[0]) / (x[1] - x[0]))
+            .fold(f64::INFINITY, f64::min)
+    }
+
     /// The hysteresis term of a record, input volts.
     pub fn apply(&self, u: &[f64]) -> Vec<f64> {
         let start = self.before.first().copied().unwrap_or(u[0]);
