@@ -376,6 +376,14 @@ fn hidden_effects_are_named() {
     assert_eq!(clean_named, 0, "clean records must get no name");
     if release {
         assert!(acc >= 0.95, "accuracy {:.1} % below 95 %", 100.0 * acc);
+        // Issue #12's bar on false names: at most 1 % of the names given. Measured 0 of 144
+        // since session 20 (both splits' diagnoses where the loop alone cannot choose, the
+        // one naming fewer effects kept); 2 of 144 before (a false `offset` beside Bouc-Wen
+        // loops under the `Span` split).
+        assert!(
+            false_names * 100 <= names_given,
+            "false names {false_names} of {names_given} above 1 %"
+        );
     } else {
         assert!(
             acc >= 0.75,

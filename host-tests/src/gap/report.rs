@@ -11,6 +11,7 @@
 //!   fast record (delay, pole, slew), the residual spectrum (resonance).
 
 use super::catalogue;
+use super::constants::CANNOT_TELL_RATIO;
 use super::data::Data;
 use super::everett::CentreLine;
 use super::select::Diagnosis;
@@ -76,6 +77,17 @@ impl Diagnosis {
                 fmt_num(kept),
                 fmt_num(other)
             ));
+            if let Some(r) = &c.by_diagnosis {
+                s.push_str(&format!(
+                    "hysteresis basis: the two splits' loops alone were within {CANNOT_TELL_RATIO}x \
+                     (RMS) of each other, so both diagnoses ran and the one naming fewer effects \
+                     (then ending lower) was kept; the {} split's named [{}] and ended at {} \
+                     noise variances\n",
+                    r.split.describe().0,
+                    r.named.join(", "),
+                    fmt_num(r.final_noise_var)
+                ));
+            }
         }
         s.push_str(&format!(
             "named: [{}]; noise floor {:.2} mV; final residual {:.2} mV ({:.2}x the floor)\n",

@@ -85,6 +85,11 @@ struct TargetProducts {
 const PRODUCTS_KEPT: usize = 4;
 
 impl SlowRegressors {
+    /// The centre line the basis' loop columns leave out.
+    pub fn form(&self) -> everett::CentreLine {
+        self.form
+    }
+
     /// The hysteresis table's input range.
     pub fn range(&self) -> (f64, f64) {
         self.range
