@@ -29,6 +29,11 @@
 //!    their sum falls: a fast effect named after them moves the fast record their fit
 //!    shares), then **swaps** of slow effects the records cannot tell apart.
 //!
+//! Steps 4-7 run with the hysteresis basis' split the records choose
+//! ([`everett::CentreLine`]); where hysteresis and drift alone leave the two splits within
+//! [`CANNOT_TELL_RATIO`] of each other and the diagnosis names hysteresis, they run under the
+//! other split too and the diagnosis naming fewer effects is kept.
+//!
 //! # What it trades
 //! The slow effects are fitted by a linear solve on settled samples, the fast ones by a
 //! bounded one- or two-dimensional search on the fast records; only the few candidates are

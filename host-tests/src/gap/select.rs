@@ -123,9 +123,10 @@ pub struct CentreChoice {
     pub band_noise_var: f64,
     /// The same with the `Span` split.
     pub span_noise_var: f64,
-    /// When those two were within [`CANNOT_TELL_RATIO`] (RMS) of each other, both splits'
-    /// diagnoses ran and the one ending lower was kept: the other's outcome (`null` in JSON
-    /// when the loop alone chose).
+    /// When those two were within [`CANNOT_TELL_RATIO`] (RMS) of each other and both splits'
+    /// diagnoses ran (the one naming fewer effects kept): the other's outcome (absent from the
+    /// JSON when the loop alone chose).
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub by_diagnosis: Option<SplitRival>,
 }
 

@@ -7,8 +7,8 @@
 //! goes to stdout (or one JSON object with `--json`: `{"named", "steps": [{"effect",
 //! "evidence", "params", "rms_before_v", "rms_after_v", "refit", "removed"}], "noise_floor_v",
 //! "final_rms_v", "unexplained", "cannot_tell", "hysteresis_split": {"chosen",
-//! "band_noise_var", "span_noise_var", "by_diagnosis"}}`; `by_diagnosis` is null unless both
-//! splits' diagnoses ran, then `{"split", "named", "final_noise_var"}` of the one not kept), a
+//! "band_noise_var", "span_noise_var", "by_diagnosis"}}`; `by_diagnosis` only where both
+//! splits' diagnoses ran: `{"split", "named", "final_noise_var"}` of the one not kept), a
 //! progress bar to stderr.
 
 use clap::Args;
@@ -59,23 +59,13 @@ pub fn run(a: &GapArgs) -> anyhow::Result<()> {
     checks::bound_gap(&sizes, base.period_s)?;
     let d = diagnose(&base, &data, &Options { progress: true })?;
     // A figure that came out NaN or infinite is an error, before anything is written.
-    // `unexplained` is null by design when every record ends near its floor, and
-    // `hysteresis_split.by_diagnosis` when the loop alone chose the split; every other
+    // `unexplained` is null by design when every record ends near its floor; every other
     // figure must be finite.
     let mut figures = d.to_json();
-    if let Some(o) = figures.as_object_mut() {
-        if o.get("unexplained").is_some_and(serde_json::Value::is_null) {
-            o.remove("unexplained");
-        }
-        if let Some(split) = o
-            .get_mut("hysteresis_split")
-            .and_then(|v| v.as_object_mut())
-            && split
-                .get("by_diagnosis")
-                .is_some_and(serde_json::Value::is_null)
-        {
-            split.remove("by_diagnosis");
-        }
+    if let Some(o) = figures.as_object_mut()
+        && o.get("unexplained").is_some_and(serde_json::Value::is_null)
+    {
+        o.remove("unexplained");
     }
     checks::finite_json(&figures, "the result")?;
     if let Some(p) = &a.out {
