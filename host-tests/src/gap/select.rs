@@ -1069,7 +1069,9 @@ fn held_level_error(data: &[Data], sims: &[Vec<f64>], var: &[f64]) -> Option<f64
 /// fit fails). Which memoryless part a table's relays carry is a property of the stage's
 /// density, not of the workflow: a PI stage's loop bends its centre line near the records'
 /// extremes, the thesis' table keeps it straight, and the split that fixes the wrong one
-/// leaves 15-350 mV that `nonlinear-gain` and `sensor-gain` then take falsely.
+/// leaves 15-350 mV that `nonlinear-gain` and `sensor-gain` then take falsely. Returns the
+/// chosen split's basis, the other's (for its own diagnosis where the two leave nearly as
+/// much, [`diagnose`]) and the choice.
 fn choose_centre_line(
     base: &ModelFile,
     data: &[Data],
