@@ -11,7 +11,7 @@
 //!   the span; half the cases start after earlier excursions (not on a major curve). Scaled
 //!   to that width, some truths move the position against the input just after a reversal
 //!   (`Hysteresis::min_slope` below zero), which no Everett table can: the per-form table
-//!   counts them apart (`hyst-branch:against-input`, else `hyst-branch:monotone`);
+//!   counts them apart (`hyst-branch:backward`, else `hyst-branch:monotone`);
 //! * `drift`: log creep or fractional (power-law `t^a`, a = 0.05-0.3) creep, 2-8 % of a step
 //!   at 10 s;
 //! * `nonlinear-gain`: a static map of tanh, exp or softplus shape (not a polynomial), with the
@@ -124,7 +124,7 @@ impl Case {
                 "hyst-start:excursion"
             });
             v.push(if h.min_slope() < 0.0 {
-                "hyst-branch:against-input"
+                "hyst-branch:backward"
             } else {
                 "hyst-branch:monotone"
             });

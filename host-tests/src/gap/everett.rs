@@ -189,7 +189,8 @@ pub const HYST_BAND_SMOOTH: f64 = 0.1;
 
 /// Which memoryless part a loop column leaves out: the centre line the fitted table keeps
 /// at the base model's `static_gain * u` is that of one of two splits of the same relays,
-/// and the records choose (`select`: the split whose hysteresis alone fits them better).
+/// and the records choose (`select`: the split whose hysteresis alone fits them better, or,
+/// where the two fit within `CANNOT_TELL_RATIO`, the one whose diagnosis names fewer effects).
 ///
 /// * [`CentreLine::Band`]: each band's relays less their reversible part `clamp(u, band)`.
 ///   A Prandtl-Ishlinskii truth is exactly that (its play operators less `u`), and so is its

@@ -31,8 +31,9 @@
 //!
 //! Steps 4-7 run with the hysteresis basis' split the records choose
 //! ([`everett::CentreLine`]); where hysteresis and drift alone leave the two splits within
-//! [`CANNOT_TELL_RATIO`] of each other and the diagnosis names hysteresis, they run under the
-//! other split too and the diagnosis naming fewer effects is kept.
+//! [`CANNOT_TELL_RATIO`] of each other and the diagnosis names hysteresis without ending at
+//! the floor, they run under the other split too and the diagnosis naming fewer effects is
+//! kept.
 //!
 //! # What it trades
 //! The slow effects are fitted by a linear solve on settled samples, the fast ones by a

@@ -64,7 +64,7 @@ impl Diagnosis {
                 .collect();
             s.push_str(&format!("final {e}: {}\n", p.join(" ")));
         }
-        if self.named.iter().any(|e| e == "hysteresis") {
+        if self.named.iter().any(|e| e == "hysteresis") || self.centre_line.by_diagnosis.is_some() {
             let c = &self.centre_line;
             let (kept, other) = match c.chosen {
                 CentreLine::Band => (c.band_noise_var, c.span_noise_var),
@@ -81,7 +81,7 @@ impl Diagnosis {
                 s.push_str(&format!(
                     "hysteresis basis: the two splits' loops alone were within {CANNOT_TELL_RATIO}x \
                      (RMS) of each other, so both diagnoses ran and the one naming fewer effects \
-                     (then ending lower) was kept; the {} split's named [{}] and ended at {} \
+                     (then ending lower) was kept; the {} split's diagnosis named [{}] and ended at {} \
                      noise variances\n",
                     r.split.describe().0,
                     r.named.join(", "),

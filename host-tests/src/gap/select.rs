@@ -108,15 +108,17 @@ pub struct Diagnosis {
     /// The residual no catalogued effect explained, when some record stays above
     /// [`super::unexplained::UNEXPLAINED_FLOOR_RATIO`] times its floor.
     pub unexplained: Option<Unexplained>,
-    /// The split of the hysteresis basis the records chose, and why.
+    /// The split of the hysteresis basis the diagnosis used, and why.
     pub centre_line: CentreChoice,
 }
 
-/// The split of the hysteresis basis ([`CentreLine`]) the records chose: hysteresis and drift
-/// fitted from the base model with each, and what each left.
+/// The split of the hysteresis basis ([`CentreLine`]) a diagnosis used: hysteresis and drift
+/// fitted from the base model with each, what each left, and, where those were too close to
+/// choose by and both splits' diagnoses ran, the other's outcome.
 #[derive(Clone, Debug, serde::Serialize)]
 pub struct CentreChoice {
-    /// The split kept for the whole diagnosis.
+    /// The split of the diagnosis kept: the one whose hysteresis and drift left less, unless
+    /// [`Self::by_diagnosis`] says the other split's diagnosis named fewer effects.
     pub chosen: CentreLine,
     /// With the `Band` split: the sum over records of the mean squared residual, in noise
     /// variances (`null` in JSON when the fit failed).
@@ -341,8 +343,14 @@ pub fn diagnose(base: &ModelFile, data: &[Data], opts: &Options) -> anyhow::Resu
             chosen: other_x.form(),
             ..centre_line
         };
-        let second = diagnose_split(&setup, other_x, rival)?;
-        fewer_names(&setup, first, second)
+        if let Some(b) = &bar {
+            b.set_message("the other split of the hysteresis basis");
+        }
+        // (a failure of the second diagnosis leaves the first as it was)
+        match diagnose_split(&setup, other_x, rival) {
+            Ok(second) => fewer_names(&setup, first, second),
+            Err(_) => first,
+        }
     } else {
         first
     };
@@ -955,7 +963,13 @@ fn diagnose_split(
 /// ([`CentreChoice::by_diagnosis`]).
 fn fewer_names(setup: &Setup, a: Diagnosis, b: Diagnosis) -> Diagnosis {
     let (fa, fb) = (a.final_noise_var(&setup.var), b.final_noise_var(&setup.var));
-    let b_first = (b.named.len(), fb) < (a.named.len(), fa);
+    // (an infinite or NaN residual never wins a tie: `total_cmp` puts NaN last)
+    let b_first = b
+        .named
+        .len()
+        .cmp(&a.named.len())
+        .then(fb.total_cmp(&fa))
+        .is_lt();
     let (mut keep, other, other_sum) = if b_first { (b, a, fa) } else { (a, b, fb) };
     keep.centre_line.by_diagnosis = Some(SplitRival {
         split: other.centre_line.chosen,

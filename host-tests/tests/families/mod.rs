@@ -609,9 +609,10 @@ impl Hysteresis {
 
     /// The least slope of the input plus the hysteresis term along a settled 0-10-0 V cycle
     /// (0.02 V steps), volts per volt. Below zero the truth's position moves against its
-    /// input just after a reversal (a Duhem or Bouc-Wen loop, or play operators, scaled to a
-    /// wide loop from a narrow one), which no Preisach density (>= 0), and so no Everett
-    /// table the stage accepts, can do: the per-form table counts those truths apart.
+    /// input just after a reversal (a Duhem or Bouc-Wen loop, play operators, or a Preisach
+    /// plane less its major loop's centre curve, scaled to a wide loop from a narrow one),
+    /// which no Preisach density (>= 0), and so no Everett table the stage accepts, can do:
+    /// the per-form table counts those truths apart.
     pub fn min_slope(&self) -> f64 {
         let mut op = HystOp::new(&self.form, self.table.as_ref(), 0.0);
         op.step(10.0);
