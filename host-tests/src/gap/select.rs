@@ -348,7 +348,7 @@ pub fn diagnose(base: &ModelFile, data: &[Data], opts: &Options) -> anyhow::Resu
         }
         // (a failure of the second diagnosis leaves the first as it was)
         match diagnose_split(&setup, other_x, rival) {
-            Ok(second) => fewer_names(&setup, first, second),
+            Ok(second) => fewer_names(&setup.var, first, second),
             Err(_) => first,
         }
     } else {
@@ -961,8 +961,8 @@ fn diagnose_split(
 /// `offset` of 279 mV and a `sensor-gain` of 0.82 took, beside the true `nonlinear-gain` the
 /// `Span` split's diagnosis named alone. Which names the other gave is kept with the choice
 /// ([`CentreChoice::by_diagnosis`]).
-fn fewer_names(setup: &Setup, a: Diagnosis, b: Diagnosis) -> Diagnosis {
-    let (fa, fb) = (a.final_noise_var(&setup.var), b.final_noise_var(&setup.var));
+fn fewer_names(var: &[f64], a: Diagnosis, b: Diagnosis) -> Diagnosis {
+    let (fa, fb) = (a.final_noise_var(var), b.final_noise_var(var));
     // (an infinite or NaN residual never wins a tie: `total_cmp` puts NaN last)
     let b_first = b
         .named
@@ -1321,6 +1321,88 @@ fn candidates(
 mod tests {
     use super::*;
     use crate::io::csv::Record;
+
+    /// A diagnosis under `split` that named `named` and ended at `rms_v` on one record.
+    fn outcome(split: CentreLine, named: &[&str], rms_v: f64) -> Diagnosis {
+        Diagnosis {
+            named: named.iter().map(|e| e.to_string()).collect(),
+            steps: Vec::new(),
+            record_noise_v: vec![1e-3],
+            noise_floor_v: 1e-3,
+            final_rms_v: rms_v,
+            record_final_rms_v: vec![rms_v],
+            base_sims: Vec::new(),
+            model: ModelFile::built_in("thesis-linear").unwrap(),
+            tried: Vec::new(),
+            signatures: signatures::Signatures::default(),
+            unexplained: None,
+            cannot_tell: Vec::new(),
+            centre_line: CentreChoice {
+                chosen: split,
+                band_noise_var: 100.0,
+                span_noise_var: 90.0,
+                by_diagnosis: None,
+            },
+        }
+    }
+
+    /// Of both splits' diagnoses the one naming fewer effects is kept, however much lower the
+    /// other ends (hidden-effect case 1038: a false offset and scale beside a Bouc-Wen loop,
+    /// 3x lower); of two naming as many, the one ending lower; a residual that is not a number
+    /// never wins the tie; the other's outcome goes with the choice, in the JSON too.
+    #[test]
+    fn the_split_whose_diagnosis_names_fewer_effects_is_kept() {
+        let var = [1e-6];
+        let span = outcome(CentreLine::Span, &["hysteresis", "nonlinear-gain"], 22e-3);
+        let band = || {
+            outcome(
+                CentreLine::Band,
+                &["offset", "hysteresis", "nonlinear-gain", "sensor-gain"],
+                7e-3,
+            )
+        };
+        for (a, b) in [(span.clone(), band()), (band(), span.clone())] {
+            let d = fewer_names(&var, a, b);
+            assert_eq!(d.centre_line.chosen, CentreLine::Span);
+            assert_eq!(d.named, ["hysteresis", "nonlinear-gain"]);
+            let r = d.centre_line.by_diagnosis.as_ref().unwrap();
+            assert_eq!((r.split, r.named.len()), (CentreLine::Band, 4));
+            assert!(
+                (r.final_noise_var - 49.0).abs() < 1e-9,
+                "{}",
+                r.final_noise_var
+            );
+            assert_eq!(
+                d.to_json()["hysteresis_split"]["by_diagnosis"]["split"],
+                "band"
+            );
+        }
+        let lower = outcome(CentreLine::Band, &["hysteresis", "nonlinear-gain"], 11e-3);
+        let higher = outcome(CentreLine::Span, &["hysteresis", "offset"], 14e-3);
+        for (a, b) in [
+            (lower.clone(), higher.clone()),
+            (higher.clone(), lower.clone()),
+        ] {
+            assert_eq!(
+                fewer_names(&var, a, b).named,
+                ["hysteresis", "nonlinear-gain"]
+            );
+        }
+        let nan = outcome(CentreLine::Span, &["hysteresis", "offset"], f64::NAN);
+        assert_eq!(
+            fewer_names(&var, lower.clone(), nan.clone())
+                .centre_line
+                .chosen,
+            CentreLine::Band
+        );
+        assert_eq!(
+            fewer_names(&var, nan, lower).centre_line.chosen,
+            CentreLine::Band
+        );
+        // The loop alone chose: no `by_diagnosis` key at all (the JSON holds no null).
+        let alone = outcome(CentreLine::Band, &["hysteresis"], 2e-3).to_json();
+        assert!(alone["hysteresis_split"].get("by_diagnosis").is_none());
+    }
 
     /// A 1 kHz record that holds `levels` volts for a second each, its output `0.8 u`.
     fn held(levels: &[f64]) -> Data {
