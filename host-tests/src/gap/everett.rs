@@ -103,6 +103,12 @@ pub const HYST_BANDS_SPAN: usize = 11;
 /// ([`radius_v`]).
 pub const HYST_RADII: usize = INTERVALS / 2;
 
+/// Radius `i` of the basis in half grid intervals (odd: a relay centred on a node switches
+/// midway between nodes); [`radius_v`] in volts, [`span_inside`] in the const layout.
+const fn radius_halves(i: usize) -> usize {
+    2 * i + 1
+}
+
 /// Loop columns of the basis: every (radius, band) pair, radius-major.
 pub const HYST_LOOP_COLS: usize = HYST_RADII * HYST_BANDS;
 
@@ -273,11 +279,12 @@ const INTERVALS: usize = GRID_NODES - 1;
 const fn span_inside(i: usize, k: usize, bands: usize) -> bool {
     let per = 2 * (INTERVALS / bands);
     let (b0, b1) = (per * k, per * (k + 1));
-    let (c0, c1) = (2 * EDGE_NODE + 2 * i + 1, 2 * (INTERVALS - EDGE_NODE));
-    if c1 < 2 * i + 1 {
+    let r = radius_halves(i);
+    let (c0, c1) = (2 * EDGE_NODE + r, 2 * (INTERVALS - EDGE_NODE));
+    if c1 < r {
         return false;
     }
-    let c1 = c1 - 2 * i - 1;
+    let c1 = c1 - r;
     let lo = if b0 > c0 { b0 } else { c0 };
     let hi = if b1 < c1 { b1 } else { c1 };
     lo < hi
@@ -546,7 +553,7 @@ fn monotone(mut e: Vec<f32>) -> Vec<f32> {
 /// radii) instead of every other one gained another 0.8 mV for seven times the solves'
 /// cubic cost (the gap bench 15 s -> 27 s).
 pub fn radius_v(range: (f64, f64), i: usize) -> f64 {
-    (2 * i + 1) as f64 * (range.1 - range.0) / (2 * INTERVALS) as f64
+    radius_halves(i) as f64 * (range.1 - range.0) / (2 * INTERVALS) as f64
 }
 
 /// The basis columns at `rows` of a record with inputs `u_v`: for each loop element the split

@@ -13,7 +13,6 @@
 use super::catalogue;
 use super::constants::CANNOT_TELL_RATIO;
 use super::data::Data;
-use super::everett::CentreLine;
 use super::select::Diagnosis;
 use crate::io::model_file::ModelFile;
 use anyhow::Context;
@@ -66,10 +65,7 @@ impl Diagnosis {
         }
         if self.named.iter().any(|e| e == "hysteresis") || self.centre_line.by_diagnosis.is_some() {
             let c = &self.centre_line;
-            let (kept, other) = match c.chosen {
-                CentreLine::Band => (c.band_noise_var, c.span_noise_var),
-                CentreLine::Span => (c.span_noise_var, c.band_noise_var),
-            };
+            let (kept, other) = c.kept_and_other();
             let (name, what) = c.chosen.describe();
             s.push_str(&format!(
                 "hysteresis basis: the {name} split ({what}): hysteresis and drift alone left {} \

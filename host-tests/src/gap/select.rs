@@ -143,6 +143,17 @@ pub struct SplitRival {
     pub final_noise_var: f64,
 }
 
+impl CentreChoice {
+    /// What hysteresis and drift alone left with the chosen split and with the other, in
+    /// noise variances.
+    pub fn kept_and_other(&self) -> (f64, f64) {
+        match self.chosen {
+            CentreLine::Band => (self.band_noise_var, self.span_noise_var),
+            CentreLine::Span => (self.span_noise_var, self.band_noise_var),
+        }
+    }
+}
+
 impl Diagnosis {
     /// Each record's final mean squared residual.
     fn final_mse(&self) -> Vec<f64> {
@@ -330,10 +341,7 @@ pub fn diagnose(base: &ModelFile, data: &[Data], opts: &Options) -> anyhow::Resu
     // other: the records cannot choose the split by the loop alone. When the first diagnosis
     // names hysteresis (else the split is no part of its model) and does not end at the
     // floor, the other split's runs too, and `fewer_names` keeps one.
-    let (kept, other) = match centre_line.chosen {
-        CentreLine::Band => (centre_line.band_noise_var, centre_line.span_noise_var),
-        CentreLine::Span => (centre_line.span_noise_var, centre_line.band_noise_var),
-    };
+    let (kept, other) = centre_line.kept_and_other();
     let close = other < CANNOT_TELL_RATIO * CANNOT_TELL_RATIO * kept;
     let d = if close
         && first.named.iter().any(|e| e == "hysteresis")
