@@ -884,18 +884,23 @@ fn pi_predistort(u: &[f64], radii_v: &[f64], weights: &[f64], z0: Option<&[f64]>
         .collect()
 }
 
-/// Issue #12's single-sine record: 10 s at 5 kHz of a 1 Hz sine over most of the range
-/// (0.5..9.5 V), a Prandtl-Ishlinskii hysteresis with random radii (a Preisach-class truth of
-/// another shape than the catalogue's radii), a loop of 10-15 % of the output span, started
-/// with every operator centred on the first input (not on the major curve), and a sensor
-/// offset, 1 mV noise. Returns per seed the names given and the final residual over the
-/// floor.
-fn single_sine_outcomes() -> Vec<(u64, Vec<String>, f64)> {
-    let (t, u) = raised_cosine(5_000.0, 10.0, 1.0, 5.0, 4.5);
-    let mut results = Vec::new();
-    for seed in [21u64, 22] {
-        let mut rng = rand::rngs::StdRng::seed_from_u64(seed);
-        let k = 10;
+/// The seeds of the single-sine requirement's run (`--ignored`): the two the guard runs and
+/// six more, drawn after the workflow's last change to them (session 21).
+const SINGLE_SINE_SEEDS: [u64; 8] = [21, 22, 23, 24, 25, 26, 27, 28];
+
+/// A Prandtl-Ishlinskii truth for the single-sine record: ten operators with radii drawn
+/// log-uniformly over 0.02..5 V and raw weights over 0.2..1, scaled so that the loop on the
+/// 0.5..9.5 V sine is a drawn 10-15 % of the input span. Returns (radii, weights, share).
+///
+/// The issue asks for a Preisach-class truth: `u + sum w_i (z_i - u)` is one only while the
+/// weights sum to less than 1 (its slope just after a reversal is `1 - sum w_i`, the
+/// density on the Preisach plane's diagonal); a draw whose narrow operators need weights
+/// beyond that to make the loop's height runs backwards after every reversal, which no
+/// Preisach density does, and is drawn again (from the same generator). Before session 21
+/// such draws were kept: seed 22's truth summed to 1.026.
+fn draw_preisach_pi(rng: &mut rand::rngs::StdRng) -> (Vec<f64>, Vec<f64>, f64) {
+    let k = 10;
+    loop {
         let mut radii_v: Vec<f64> = (0..k)
             .map(|_| (0.02f64.ln() + (5.0f64.ln() - 0.02f64.ln()) * rng.r#gen::<f64>()).exp())
             .collect();
@@ -910,6 +915,24 @@ fn single_sine_outcomes() -> Vec<(u64, Vec<String>, f64)> {
             .map(|(w, r)| 2.0 * w * r.min(4.5))
             .sum();
         let weights: Vec<f64> = raw.iter().map(|w| w * share * 9.0 / h).collect();
+        if weights.iter().sum::<f64>() < 1.0 {
+            return (radii_v, weights, share);
+        }
+    }
+}
+
+/// Issue #12's single-sine record: 10 s at 5 kHz of a 1 Hz sine over most of the range
+/// (0.5..9.5 V), a Prandtl-Ishlinskii hysteresis with random radii (a Preisach-class truth of
+/// another shape than the catalogue's radii), a loop of 10-15 % of the output span, started
+/// with every operator centred on the first input (not on the major curve), and a sensor
+/// offset, 1 mV noise. Returns per seed the names given and the final residual over the
+/// floor.
+fn single_sine_outcomes(seeds: &[u64]) -> Vec<(u64, Vec<String>, f64)> {
+    let (t, u) = raised_cosine(5_000.0, 10.0, 1.0, 5.0, 4.5);
+    let mut results = Vec::new();
+    for &seed in seeds {
+        let mut rng = rand::rngs::StdRng::seed_from_u64(seed);
+        let (radii_v, weights, share) = draw_preisach_pi(&mut rng);
         let offset_v = rng.gen_range(0.01..0.03) * if rng.gen_bool(0.5) { 1.0 } else { -1.0 };
         let mut truth = ModelFile::built_in("thesis-linear").unwrap();
         truth.converters.noise_v = 1e-3;
@@ -932,10 +955,26 @@ fn single_sine_outcomes() -> Vec<(u64, Vec<String>, f64)> {
         let base = ModelFile::built_in("thesis-linear").unwrap();
         let d = diagnose(&base, &data, &Options::default()).unwrap();
         println!(
-            "seed {seed}: truth radii {radii_v:.3?} weights {weights:.4?} (loop {:.0} % of the span), offset {:.1} mV\n{}",
+            "seed {seed}: truth radii {radii_v:.3?} weights {weights:.4?} (sum {:.3}; loop {:.0} % of the span), offset {:.1} mV\n{}",
+            weights.iter().sum::<f64>(),
             100.0 * share,
             1e3 * offset_v,
             d.table()
+        );
+        // The same residual after the first cycle (the input has then visited both of its
+        // extremes, which wipes out the start memory of every relay it can switch): how much
+        // of the figure is the start.
+        let y_fit = gap::sim(&d.model, &data[0]).unwrap();
+        let tail: Vec<usize> = (0..t.len()).filter(|&i| t[i] >= 1.0).collect();
+        let tail_rms = (tail
+            .iter()
+            .map(|&i| (data[0].y_v[i] - y_fit[i]).powi(2))
+            .sum::<f64>()
+            / tail.len() as f64)
+            .sqrt();
+        println!(
+            "seed {seed}: after the first cycle {:.2}x the floor",
+            tail_rms / d.noise_floor_v
         );
         results.push((seed, d.named.clone(), d.final_rms_v / d.noise_floor_v));
     }
@@ -962,7 +1001,7 @@ fn single_sine_outcomes() -> Vec<(u64, Vec<String>, f64)> {
 /// memory and with the table ending at the records' extremes 33x and 26x.
 #[test]
 fn single_sine_record_names_hysteresis_and_its_start() {
-    for (seed, named, ratio) in single_sine_outcomes() {
+    for (seed, named, ratio) in single_sine_outcomes(&[21, 22]) {
         assert!(
             named.iter().any(|n| n == "hysteresis"),
             "seed {seed}: {named:?}"
@@ -986,7 +1025,7 @@ fn single_sine_record_names_hysteresis_and_its_start() {
 #[test]
 #[ignore = "issue #12: not met yet (3.24x and 6.78x the floor, seed 22 without its offset)"]
 fn single_sine_record_names_hysteresis_and_offset() {
-    for (seed, named, ratio) in single_sine_outcomes() {
+    for (seed, named, ratio) in single_sine_outcomes(&SINGLE_SINE_SEEDS) {
         let mut named = named.clone();
         named.sort();
         assert_eq!(named, ["hysteresis", "offset"], "seed {seed}");
