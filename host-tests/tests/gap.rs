@@ -986,19 +986,19 @@ fn single_sine_outcomes(seeds: &[u64]) -> Vec<(u64, Vec<String>, f64)> {
 
 /// What the workflow achieves on the single-sine records today: hysteresis named, no
 /// slow effect but `offset` or `nonlinear-gain` beside it, and the residual within 8x the
-/// floor. Measured 3.2x (hysteresis and offset, 26.9 mV for the truth's 25.5 mV) and 6.8x
-/// (hysteresis alone: `sensor-gain` and `nonlinear-gain` each explain 77-78 % of what the
-/// table leaves, so neither is named and the table says it cannot tell them apart, and the
-/// true offset is fitted at -23.2 mV for -29.7 mV and removed by the final check, the
-/// residual growing 1.50x without it against a bar of 1.62x). Session 16's start search
-/// (three candidates refitted on a single record, decaying oscillations of ratio 0.85 among
-/// them) took seed 22 from 7.2x, where the offset's growth was 1.31x. Before static shapes that
+/// floor. Measured on seeds 21 and 22 (session 21, the truths drawn inside the Preisach
+/// class): 3.24x (hysteresis and offset, 26.9 mV for the truth's 25.5 mV; 1.79x after the
+/// first cycle) and 4.92x (hysteresis alone: the true 21.3 mV offset is fitted at 30.8 mV and
+/// removed by the final check, the residual without it sitting only 2.3 mV off zero; 3.15x
+/// after the first cycle). The history on the two seeds as drawn before session 21 (seed 22
+/// then a truth outside the Preisach class): session 16's start search (three candidates
+/// refitted on a single record) 3.24x and 6.78x, from 7.2x; before static shapes that
 /// explain alike were left unnamed, 3.3x and 3.8x (the second with a `nonlinear-gain` the
-/// truth lacks) with the start candidate's depth refined; 10.6x and 9.0x
-/// with the candidates alone; with the fixed geometric radii before the basis followed the
-/// table 14.7x, and 6.2x with `nonlinear-gain`; with the bands' reversible slopes fitted
-/// 7.1x and 6.3x, but the families suite lost 11 points of exact names; without a start
-/// memory and with the table ending at the records' extremes 33x and 26x.
+/// truth lacks) with the start candidate's depth refined; 10.6x and 9.0x with the candidates
+/// alone; with the fixed geometric radii before the basis followed the table 14.7x, and 6.2x
+/// with `nonlinear-gain`; with the bands' reversible slopes fitted 7.1x and 6.3x, but the
+/// families suite lost 11 points of exact names; without a start memory and with the table
+/// ending at the records' extremes 33x and 26x.
 #[test]
 fn single_sine_record_names_hysteresis_and_its_start() {
     for (seed, named, ratio) in single_sine_outcomes(&[21, 22]) {
@@ -1017,20 +1017,32 @@ fn single_sine_record_names_hysteresis_and_its_start() {
 }
 
 /// Issue #12's requirement on the single-sine record: hysteresis and offset named, the
-/// residual within 2x its floor. Not met yet (one seed names hysteresis and offset at 3.3x
-/// the floor, the other hysteresis and `nonlinear-gain` at 3.8x: the table's relays that
-/// never switch during the record make a constant of their own, and the truth's start, every
-/// operator centred on the first input, is not a memory one table can hold): run with
-/// `--ignored`.
+/// residual within 2x its floor, on eight seeds. Not met yet (session 21: offset named on 3
+/// of 8, final 2.99-9.99x the floor, median 5.0x; after the first cycle 1.43-7.57x): the
+/// truth's start, every operator centred on the first input at the sine's bottom, needs a
+/// history below the table's range, and operators narrower than the table's first radius
+/// (half a grid interval, 0.11 V) are smeared over it. Run with `--ignored`; it prints every
+/// seed's outcome before it fails.
 #[test]
-#[ignore = "issue #12: not met yet (3.24x and 6.78x the floor, seed 22 without its offset)"]
+#[ignore = "issue #12: not met yet (offset named on 3 of 8 seeds, 2.99-9.99x the floor)"]
 fn single_sine_record_names_hysteresis_and_offset() {
-    for (seed, named, ratio) in single_sine_outcomes(&SINGLE_SINE_SEEDS) {
-        let mut named = named.clone();
-        named.sort();
-        assert_eq!(named, ["hysteresis", "offset"], "seed {seed}");
-        assert!(ratio <= 2.0, "seed {seed}: final {ratio:.2}x the floor");
-    }
+    let outcomes = single_sine_outcomes(&SINGLE_SINE_SEEDS);
+    let failed: Vec<String> = outcomes
+        .iter()
+        .filter(|(_, named, ratio)| {
+            let mut named = named.clone();
+            named.sort();
+            named != ["hysteresis", "offset"] || *ratio > 2.0
+        })
+        .map(|(seed, named, ratio)| format!("seed {seed}: {named:?} at {ratio:.2}x"))
+        .collect();
+    assert!(
+        failed.is_empty(),
+        "{} of {} seeds miss: {}",
+        failed.len(),
+        outcomes.len(),
+        failed.join("; ")
+    );
 }
 
 /// `piezo gap --json` on a clean record exits 0 with `"unexplained": null` (the verb's check
