@@ -1237,3 +1237,62 @@ fn drift_is_named_when_the_recorded_input_is_noisy() {
     assert_eq!(noisy_named, exact_named);
     assert!(*noisy_ratio <= 1.5, "{noisy_ratio}");
 }
+
+/// The full thesis stage with a sensor offset of another size than the demo's (issue #12
+/// item 3: an offset is the first effect a real lab meets), on the identification protocol
+/// (40 s slow record), from `thesis-linear`: the thesis' three slow effects named, nothing
+/// the truth lacks, and the residual within 5x the floor. Before session 21 the offsets of
+/// +30 and +60 mV ended at 19.5x and 19.2x with drift and hysteresis alone: `nonlinear-gain`
+/// and `sensor-gain` explained 82-85 % of the pooled residual each and neither was named,
+/// though the records told them apart one by one. Measured now: +18 mV 1.51x, +30 mV 2.18x,
+/// -25 mV 1.08x, +60 mV 4.14x, each with drift, hysteresis, nonlinear-gain and the slew
+/// limit (the offset itself is not named: the fitted table's constant takes it, GAP.md).
+/// These offsets and seeds were drawn after the change was made on the demo's records
+/// shifted by +12 and +30 mV.
+#[test]
+fn thesis_stage_with_a_sensor_offset_ends_near_the_floor() {
+    let base = ModelFile::built_in("thesis-linear").unwrap();
+    let mut outcomes = Vec::new();
+    for (seed, offset_v) in [(7u64, 0.018), (8, 0.030), (9, -0.025), (10, 0.060)] {
+        let mut truth = ModelFile::built_in("thesis-full").unwrap();
+        truth.converters.seed = seed;
+        truth.offset = Some(host_tests::io::model_file::OffsetSection { offset_v });
+        let d = diagnose(&base, &protocol_data(&truth, 40.0), &Options::default()).unwrap();
+        let ratio = d.final_rms_v / d.noise_floor_v;
+        println!(
+            "offset {:+.0} mV (seed {seed}): named {:?}, final {ratio:.2}x the floor\n{}",
+            1e3 * offset_v,
+            d.named,
+            d.table()
+        );
+        outcomes.push((offset_v, d.named.clone(), ratio));
+    }
+    for (offset_v, named, ratio) in &outcomes {
+        println!(
+            "offset {:+.0} mV: named {named:?}, final {ratio:.2}x the floor",
+            1e3 * offset_v
+        );
+    }
+    for (offset_v, named, ratio) in &outcomes {
+        let at = format!("offset {:+.0} mV", 1e3 * offset_v);
+        for e in ["drift", "hysteresis", "nonlinear-gain"] {
+            assert!(
+                named.iter().any(|n| n == e),
+                "{at}: {e} not named: {named:?}"
+            );
+        }
+        let truth = [
+            "drift",
+            "hysteresis",
+            "nonlinear-gain",
+            "slew-rate-limit",
+            "saturation",
+            "offset",
+        ];
+        assert!(
+            named.iter().all(|n| truth.contains(&n.as_str())),
+            "{at}: a name the truth lacks: {named:?}"
+        );
+        assert!(*ratio <= 5.0, "{at}: final {ratio:.2}x the floor");
+    }
+}

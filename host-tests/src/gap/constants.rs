@@ -63,6 +63,11 @@ pub const CANDIDATE_ROUNDS: usize = 1;
 pub const DRIFT_KNEES: [f64; 6] = [0.5, 0.6, 0.7, 0.8, 0.9, 1.0];
 /// At most this many steps.
 pub const MAX_STEPS: usize = 10;
+/// Above this many noise floors (RMS) in some record, a step whose static shapes explain
+/// alike and leave nothing else to name tries each jointly with an `offset` (our assumption:
+/// the "never silent" bar of 2x the floor; below it, leaving the look-alikes unnamed
+/// costs little).
+pub const PAIR_FLOOR_RATIO: f64 = 2.0;
 /// Fewest samples a record must have to show anything.
 pub const MIN_SAMPLES: usize = 200;
 /// Records at or above this rate are "fast" (edges resolved), volts... Hz.
