@@ -149,4 +149,7 @@ pub const CANNOT_TELL_RATIO: f64 = 1.25;
 /// times of one another's, and whichever won took the true one's place or a misfit of the
 /// loop's form: 21 of the 30 such steps named a false effect. The first condition keeps a
 /// step that explains little apart: a scale explaining 13 % where an offset explains 2 %).
+/// Since session 21 the shares are compared in every record too (what each leaves above the
+/// floor, plus one noise variance, either way: `select::explain_alike`): one record that
+/// tells the two apart does, however alike the pool.
 pub const STATIC_TELL_RATIO: f64 = 1.5;

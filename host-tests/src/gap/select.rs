@@ -26,7 +26,8 @@ use anyhow::{Context, ensure};
 /// One step of the workflow: the effect added or refitted.
 #[derive(Clone, Debug, serde::Serialize)]
 pub struct Step {
-    /// Effect name (one of [`EFFECTS`]).
+    /// Effect name (one of [`EFFECTS`]; a refit of several, or a static shape fitted with an
+    /// offset at one step, `X+offset`: their names joined by `+`).
     pub effect: String,
     /// Evidence in words.
     pub evidence: String,
@@ -193,7 +194,9 @@ impl Diagnosis {
 /// Two effects the records cannot tell apart. Either a named effect and another that, fitted
 /// in its place, leaves every record's residual within [`CANNOT_TELL_RATIO`] of the named
 /// one's; or two static shapes a step could add, each explaining nearly as much as the other
-/// ([`STATIC_TELL_RATIO`]), of which neither is named (`neither_named`).
+/// ([`STATIC_TELL_RATIO`], pooled and in every record: `explain_alike`), of which neither is
+/// named at that step (`neither_named`; dropped from the list where a later step, or a pair
+/// with an offset at the same step, names one of them).
 #[derive(Clone, Debug, serde::Serialize)]
 pub struct CannotTell {
     /// The effect named (with `neither_named`: the one the step would have added).
@@ -288,11 +291,11 @@ fn alike_in_every_record(a: &[f64], b: &[f64], var: &[f64]) -> bool {
 
 /// The pairs tried where the steps could tell none of `drop` (static shapes that explain
 /// alike) from the others: each shape among them with `offset` (a shape beside a level, the
-/// offset among them or not), where the offset is not named yet. Not two shapes together: a
+/// offset among them or not), where the model has no offset yet. Not two shapes together: a
 /// scale and a curvature make a free quadratic, which took up a loop's misfit on single
 /// sines and put a `sensor-gain` the truth lacked in place of its offset (session 21).
-fn static_pairs(drop: &[String], named: &[String]) -> Vec<(String, String)> {
-    if named.iter().any(|n| n == "offset") {
+fn static_pairs(drop: &[String], named: &[String], model: &ModelFile) -> Vec<(String, String)> {
+    if named.iter().any(|n| n == "offset") || catalogue::present(model, "offset") {
         return Vec::new();
     }
     STATIC_SHAPES
@@ -303,7 +306,8 @@ fn static_pairs(drop: &[String], named: &[String]) -> Vec<(String, String)> {
 }
 
 /// `model` with the slow effects it has and `extra` fitted jointly (one round of the
-/// structure search, as a step's candidates), simulated on every record.
+/// structure search, as a step's candidates: [`refit_slow_rounds`]), simulated on every
+/// record.
 fn fit_slow_set(
     model: &ModelFile,
     data: &[Data],
@@ -311,22 +315,7 @@ fn fit_slow_set(
     extra: &[&str],
     u_range: (f64, f64),
 ) -> Option<Fitted> {
-    let base0 = catalogue::without_slow(model);
-    let y0: Vec<Vec<f64>> = data
-        .iter()
-        .map(|d| sim(&base0, d))
-        .collect::<anyhow::Result<_>>()
-        .ok()?;
-    let mut set = present_slow(model);
-    set.extend(
-        extra
-            .iter()
-            .copied()
-            .filter(|e| !set.contains(e))
-            .collect::<Vec<_>>(),
-    );
-    let p = fit_slow(data, &y0, slow_x, &set, u_range, CANDIDATE_ROUNDS)?;
-    let m = catalogue::with_slow(model, &p, u_range)?;
+    let m = refit_slow_rounds(model, extra, data, slow_x, u_range, CANDIDATE_ROUNDS)?;
     let (s, ms) = simulate_all(&m, data).ok()?;
     Some((m, s, ms))
 }
@@ -481,7 +470,7 @@ fn diagnose_split(
         .collect();
     let mut steps: Vec<Step> = Vec::new();
     let mut named: Vec<String> = Vec::new();
-    let mut tried = Vec::new();
+    let mut tried: Vec<Vec<(String, f64, f64, bool)>> = Vec::new();
     let mut ambiguous: Vec<CannotTell> = Vec::new();
     let any_hold = data.iter().any(Data::has_hold);
 
@@ -549,6 +538,8 @@ fn diagnose_split(
             (score, explained, harmless)
         };
         let mut scored = Vec::new();
+        // The look-alikes a pair step stands for (`static_pairs`).
+        let mut pair_note: Option<Vec<String>> = None;
         for c in cands {
             let set = if FAST.contains(&c.effect.as_str()) {
                 &fast_set
@@ -620,8 +611,9 @@ fn diagnose_split(
         }
         // The static effects the records cannot tell apart: when the best admissible
         // candidate is one of them and another both explains and leaves nearly as much
-        // (within STATIC_TELL_RATIO either way), neither is named (the records leave the
-        // choice to chance) and the pair is reported.
+        // (within STATIC_TELL_RATIO either way, pooled and in every record), neither is named
+        // (the records leave the choice to chance) and the pair is reported; each may then be
+        // tried beside an offset.
         let best_effect = scored
             .iter()
             .filter(|x| x.3)
@@ -697,6 +689,12 @@ fn diagnose_split(
                     }
                 }
                 let drop: Vec<String> = rivals.into_iter().map(|(r, _, _)| r).chain([e]).collect();
+                // (the best score among the look-alikes: a pair must beat it)
+                let best_dropped = scored
+                    .iter()
+                    .filter(|x| x.3 && !x.0.refit && drop.contains(&x.0.effect))
+                    .map(|x| x.1)
+                    .fold(f64::INFINITY, f64::min);
                 scored.retain(|x| x.0.refit || !drop.contains(&x.0.effect));
                 // Where that leaves nothing to name far above the floor, the shapes may be
                 // told apart beside a level: each fitted jointly with an offset (the steps add
@@ -710,7 +708,7 @@ fn diagnose_split(
                         .zip(&var)
                         .any(|(m, v)| *m > PAIR_FLOOR_RATIO * PAIR_FLOOR_RATIO * v)
                 {
-                    let pairs = static_pairs(&drop, &named);
+                    let pairs = static_pairs(&drop, &named, &model);
                     let fitted = par_map(&pairs, |(a, b)| {
                         fit_slow_set(&model, data, &slow_x, &[a.as_str(), b.as_str()], u_range)
                     });
@@ -728,20 +726,39 @@ fn diagnose_split(
                                 mse: mse_v,
                             };
                             let (score, explained, harmless) = judge(&c, &all_set);
-                            let ok = score < 0.0 && explained >= MIN_EXPLAINED && harmless;
+                            // Admissible, and better than the look-alikes alone by the score,
+                            // which counts the offset's parameter.
+                            let ok = score < 0.0
+                                && score < best_dropped
+                                && explained >= MIN_EXPLAINED
+                                && harmless;
                             Some((c, score, explained, ok))
                         })
                         .collect();
-                    judged.sort_by(|a, b| a.1.total_cmp(&b.1));
-                    // The best pair, told apart from every other (by the steps' own test).
-                    let told = judged.first().is_some_and(|first| {
-                        first.3
-                            && judged[1..].iter().all(|q| {
-                                !explain_alike((first.2, &first.0.mse), (q.2, &q.0.mse), &var)
-                            })
-                    });
-                    if told {
-                        scored.push(judged.swap_remove(0));
+                    if let Some(t) = tried.last_mut() {
+                        t.extend(
+                            judged
+                                .iter()
+                                .map(|(c, sc, ex, ok)| (c.effect.clone(), *sc, *ex, *ok)),
+                        );
+                    }
+                    // The best admissible pair, told apart from every other (by the steps' own
+                    // test).
+                    let best = judged
+                        .iter()
+                        .enumerate()
+                        .filter(|(_, x)| x.3)
+                        .min_by(|a, b| a.1.1.total_cmp(&b.1.1))
+                        .map(|(i, _)| i);
+                    if let Some(i) = best {
+                        let first = &judged[i];
+                        let told = judged.iter().enumerate().all(|(j, q)| {
+                            j == i || !explain_alike((first.2, &first.0.mse), (q.2, &q.0.mse), &var)
+                        });
+                        if told {
+                            pair_note = Some(drop.clone());
+                            scored.push(judged.swap_remove(i));
+                        }
                     }
                 }
             }
@@ -759,10 +776,12 @@ fn diagnose_split(
             .iter()
             .flat_map(|p| params_json(&best.model, p))
             .collect();
-        let words = if parts.len() > 1 {
+        let words = if let (true, Some(alike)) = (parts.len() > 1, &pair_note) {
             format!(
-                "{} fitted together: the steps could not tell them apart one at a time",
-                parts.join(" and ")
+                "{} fitted together: {} explained alike one at a time, and this pair explains \
+                 clearly more than any other",
+                parts.join(" and "),
+                alike.join(", ")
             )
         } else {
             sigs.describe(&best.effect, &best.model)
@@ -1067,8 +1086,8 @@ fn diagnose_split(
     }
     let mut cannot_tell = cannot_tell(&model, base, &named, data, &slow_x, u_range, &cur_mse);
     // A pair left unnamed at one step whose shape a later step named (told apart then, by the
-    // held levels or because the rival no longer explained alike) is no longer a pair the
-    // records cannot tell.
+    // held levels or because the rival no longer explained alike), or the same step beside an
+    // offset, is no longer a pair the records cannot tell.
     // A drift that gave way stays reported unless a later step named it.
     ambiguous.retain(|c| {
         if c.neither_named {
@@ -1274,6 +1293,18 @@ pub(super) fn refit_slow(
     slow_x: &SlowRegressors,
     u_range: (f64, f64),
 ) -> Option<ModelFile> {
+    refit_slow_rounds(m, extra, data, slow_x, u_range, STRUCTURE_ROUNDS)
+}
+
+/// [`refit_slow`] with `rounds` of the structure search.
+fn refit_slow_rounds(
+    m: &ModelFile,
+    extra: &[&str],
+    data: &[Data],
+    slow_x: &SlowRegressors,
+    u_range: (f64, f64),
+    rounds: usize,
+) -> Option<ModelFile> {
     let mut set = present_slow(m);
     for e in extra {
         if !set.contains(e) {
@@ -1289,7 +1320,7 @@ pub(super) fn refit_slow(
         .map(|d| sim(&b0, d))
         .collect::<anyhow::Result<_>>()
         .ok()?;
-    let p = fit_slow(data, &y0, slow_x, &set, u_range, STRUCTURE_ROUNDS)?;
+    let p = fit_slow(data, &y0, slow_x, &set, u_range, rounds)?;
     catalogue::with_slow(m, &p, u_range)
 }
 
@@ -1491,22 +1522,32 @@ mod tests {
     }
 
     /// The pairs a step tries when its static shapes explain alike: each shape with the
-    /// offset, never two shapes, none once the offset is named.
+    /// offset, never two shapes, none once the offset is named or the model has one.
     #[test]
     fn look_alike_shapes_are_paired_with_the_offset_only() {
         let s = |v: &[&str]| v.iter().map(|x| x.to_string()).collect::<Vec<String>>();
+        let base = ModelFile::built_in("thesis-linear").unwrap();
         assert_eq!(
-            static_pairs(&s(&["nonlinear-gain", "sensor-gain"]), &s(&["hysteresis"])),
+            static_pairs(
+                &s(&["nonlinear-gain", "sensor-gain"]),
+                &s(&["hysteresis"]),
+                &base
+            ),
             vec![
                 ("sensor-gain".to_string(), "offset".to_string()),
                 ("nonlinear-gain".to_string(), "offset".to_string())
             ]
         );
         assert_eq!(
-            static_pairs(&s(&["offset", "nonlinear-gain"]), &[]),
+            static_pairs(&s(&["offset", "nonlinear-gain"]), &[], &base),
             vec![("nonlinear-gain".to_string(), "offset".to_string())]
         );
-        assert!(static_pairs(&s(&["nonlinear-gain", "sensor-gain"]), &s(&["offset"])).is_empty());
+        let look_alikes = s(&["nonlinear-gain", "sensor-gain"]);
+        assert!(static_pairs(&look_alikes, &s(&["offset"]), &base).is_empty());
+        // An offset the model has (a base model's, refitted with each step) is no new effect.
+        let mut with_offset = base.clone();
+        with_offset.offset = Some(crate::io::model_file::OffsetSection { offset_v: 0.01 });
+        assert!(static_pairs(&look_alikes, &[], &with_offset).is_empty());
     }
 
     /// A diagnosis under `split` that named `named` and ended at `rms_v` on one record.

@@ -5,7 +5,9 @@
 //! Records are CSV ([`host_tests::io::csv`]) or MATLAB v5 `.mat` files
 //! ([`host_tests::io::mat`], variables named by `--vars`, default `t=t,u=u,y=y`). The table
 //! goes to stdout (or one JSON object with `--json`: `{"named", "steps": [{"effect",
-//! "evidence", "params", "rms_before_v", "rms_after_v", "refit", "removed"}], "noise_floor_v",
+//! "evidence", "params", "rms_before_v", "rms_after_v", "refit", "removed"}] (a step's
+//! `effect` joins with `+` the effects it fitted together: a refit, or `X+offset`),
+//! "noise_floor_v",
 //! "final_rms_v", "unexplained", "cannot_tell", "hysteresis_split": {"chosen",
 //! "band_noise_var", "span_noise_var", "by_diagnosis"}}`; `by_diagnosis` only where both
 //! splits' diagnoses ran: `{"split", "named", "final_noise_var"}` of the one not kept), a
