@@ -945,6 +945,33 @@ fn diagnose_split(
                     "removed in the final check{with}: without it the residual above the noise floor grows only {ratio:.2}x (< {bar_e:.2}x)"
                 ),
             };
+            // Such an offset is one the records cannot tell from the table's own constant
+            // (its relays the records never switch, and its start memory): say so.
+            if let Some((fitted_v, level_v)) = unshown
+                && unit.len() == 1
+                && e == "offset"
+                && named.iter().any(|n| n == "hysteresis")
+            {
+                ambiguous.push(CannotTell {
+                    named: "hysteresis".into(),
+                    alternative: "offset".into(),
+                    neither_named: false,
+                    rms_v: rms_of(&ms),
+                    alternative_rms_v: rms_of(&cur_mse),
+                    why: format!(
+                        "an offset fitted at {:.1} mV beside the hysteresis table leaves {:.2} mV; \
+                         taken out, the table's refit takes the constant up ({:.2} mV, the \
+                         residual {:.1} mV off zero): the table's relays these records never \
+                         switch, and its start memory, hold a constant of their own; a hold at \
+                         a known input before the record, or records that reach both ends of \
+                         the range, tell a sensor offset from them",
+                        1e3 * fitted_v,
+                        1e3 * rms_of(&cur_mse),
+                        1e3 * rms_of(&ms),
+                        1e3 * level_v
+                    ),
+                });
+            }
             steps.push(Step {
                 removed: true,
                 ..Step::new(e.clone(), evidence, &cur_mse, &ms, s.clone())
