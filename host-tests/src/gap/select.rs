@@ -625,7 +625,7 @@ fn diagnose_split(
                     x.2,
                     rms_of(&x.0.mse),
                     &x.0.sims,
-                    x.0.mse.clone(),
+                    &x.0.mse,
                 )
             });
         if let Some((e, false, ex, e_rms, e_sims, e_mse)) = best_effect
@@ -646,7 +646,7 @@ fn diagnose_split(
                 !x.0.refit
                     && x.0.effect != e
                     && STATIC_SHAPES.contains(&x.0.effect.as_str())
-                    && explain_alike((ex, &e_mse), (x.2, &x.0.mse), &var)
+                    && explain_alike((ex, e_mse), (x.2, &x.0.mse), &var)
             };
             let verdicts: Vec<(usize, Option<bool>)> = scored
                 .iter()
