@@ -124,6 +124,22 @@ pub const DRIFT_TAIL_MIN_NOISE: f64 = 3.0;
 /// or a creep's start 0.003-0.063 (the other side of zero in hidden-effect case 1038); 0.12
 /// is the geometric middle of 0.063 and 0.24.
 pub const OFFSET_SHOWN_MIN: f64 = 0.12;
+/// A record whose input starts within this of 0 V and stays there for a while starts **at
+/// rest at 0 V**: there every catalogued effect but `offset` predicts no output (a scale, a
+/// curvature `K'(u) u` and a settled drift `w(0)` all vanish at 0 V), so the residual of a
+/// model without the offset shows the sensor's zero directly (our assumption: 10 mV, a tenth
+/// of a per cent of the range, moves a 5 % scale error by 0.5 mV, under the noise).
+pub const REST_ZERO_INPUT_V: f64 = 0.01;
+/// Share of a fitted `offset` that the residual without it must show over the records' rest
+/// at 0 V ([`REST_ZERO_INPUT_V`]), on the same side of zero and beyond
+/// [`REST_ZERO_SIGMAS`] standard errors of its mean, for the final check to keep it where
+/// the line test ([`OFFSET_SHOWN_MIN`]) does not (our assumption: at rest at 0 V a sensor
+/// offset shows whole, the refit of the others cannot reach it there, so half of it is a
+/// lenient bar; a constant that only mopped up another effect's misfit shows nothing there).
+pub const REST_ZERO_SHOWN_MIN: f64 = 0.5;
+/// Standard errors of the mean the rest level must stand beyond ([`REST_ZERO_SHOWN_MIN`];
+/// our assumption: three, a one-sided chance of about 1e-3 for noise alone).
+pub const REST_ZERO_SIGMAS: f64 = 3.0;
 
 /// Shortest run of constant input that counts as a hold, seconds (our assumption: long enough
 /// for a drift tail of 10-100 ms lags to show after the step's transient).

@@ -29,7 +29,7 @@
 use super::constants::{HELD_LOOP_MIN_DIR_SHARE, HELD_LOOP_MIN_HOLDS, HELD_LOOP_MIN_S};
 use super::{
     DRIFT_TAIL_MIN_NOISE, Data, HYST_LOOP_MIN_NOISE, LINE_RATIO_MIN, MAX_MODE_DAMPING,
-    OFFSET_SHOWN_MIN, catalogue,
+    OFFSET_SHOWN_MIN, REST_ZERO_INPUT_V, REST_ZERO_SHOWN_MIN, REST_ZERO_SIGMAS, catalogue,
 };
 use crate::io::model_file::ModelFile;
 use model_core::params;
@@ -62,6 +62,10 @@ pub struct Signatures {
     pub level_v: f64,
     /// Slope of that line (a scale error of the monitor), fraction.
     pub scale: f64,
+    /// The residual's mean over the records' first rest at 0 V input (from the first sample
+    /// until the input first moves, in records that start within [`REST_ZERO_INPUT_V`] of
+    /// 0 V) and the standard error of that mean, volts; `None` where no record starts so.
+    pub rest_zero_v: Option<(f64, f64)>,
     /// Noise floor, volts.
     pub noise_v: f64,
     /// Residual spectrum of the first fast record: (frequency Hz, magnitude V) for plots.
@@ -142,8 +146,25 @@ pub fn compute(data: &[Data], sims: &[Vec<f64>], noise: &[f64]) -> Signatures {
     let mut all_p = 0.0;
     // Sums of the residual's line against the simulated output (records weigh equally).
     let (mut s1, mut sx, mut sxx, mut sr, mut sxr) = (0.0, 0.0, 0.0, 0.0, 0.0);
-    for (d, y) in data.iter().zip(sims) {
+    // Sums over the records' first rest at 0 V: residual, samples, noise variance.
+    let (mut rest_sum, mut rest_n, mut rest_var) = (0.0, 0usize, 0.0);
+    for (k, (d, y)) in data.iter().zip(sims).enumerate() {
         let r: Vec<f64> = d.y_v.iter().zip(y).map(|(a, b)| a - b).collect();
+        if let Some(&u0) = d.u_v.first()
+            && u0.abs() <= REST_ZERO_INPUT_V
+        {
+            // Until the input first leaves its hold band (the output cannot move before it).
+            let band = d.hold_band_v.max(1e-9);
+            let end = d
+                .u_v
+                .iter()
+                .position(|u| (u - u0).abs() > band)
+                .unwrap_or(d.len())
+                .min(r.len());
+            rest_sum += r[..end].iter().sum::<f64>();
+            rest_n += end;
+            rest_var += end as f64 * noise.get(k).map_or(0.0, |s| s * s);
+        }
         let w = 1.0 / d.len().max(1) as f64;
         for (x, e) in y.iter().zip(&r) {
             s1 += w;
@@ -227,6 +248,10 @@ pub fn compute(data: &[Data], sims: &[Vec<f64>], noise: &[f64]) -> Signatures {
     if det.abs() > 1e-12 * (s1 * sxx).max(1e-300) {
         s.scale = (s1 * sxr - sx * sr) / det;
         s.level_v = (sr - s.scale * sx) / s1;
+    }
+    if rest_n > 0 {
+        let n = rest_n as f64;
+        s.rest_zero_v = Some((rest_sum / n, rest_var.sqrt() / n));
     }
     s
 }
@@ -377,11 +402,30 @@ impl Signatures {
 
     /// Does this residual, of a model without `model`'s fitted offset, show that offset? Its
     /// least-squares line against the simulated output must sit, at zero output, on the
-    /// constant's side of zero and at least [`OFFSET_SHOWN_MIN`] of its value away: a constant
-    /// the residual does not show worked through the refit of the other effects.
+    /// constant's side of zero and at least [`OFFSET_SHOWN_MIN`] of its value away, or its
+    /// mean over the records' rest at 0 V input must show [`REST_ZERO_SHOWN_MIN`] of it
+    /// there, [`REST_ZERO_SIGMAS`] standard errors clear of zero (at 0 V no other effect
+    /// predicts any output, so the refit of the others cannot take a sensor offset up
+    /// there): a constant the residual shows in neither worked through the refit of the
+    /// other effects.
     pub fn shows_offset(&self, model: &ModelFile) -> bool {
         let fitted_v = model.offset.as_ref().map_or(0.0, |o| o.offset_v);
-        fitted_v * self.level_v > 0.0 && self.level_v.abs() >= OFFSET_SHOWN_MIN * fitted_v.abs()
+        let line =
+            fitted_v * self.level_v > 0.0 && self.level_v.abs() >= OFFSET_SHOWN_MIN * fitted_v.abs();
+        line || self.shows_offset_at_rest(model)
+    }
+
+    /// Does this residual, of a model without `model`'s fitted offset, show that offset over
+    /// the records' rest at 0 V input? Its mean there must sit on the constant's side of zero,
+    /// at least [`REST_ZERO_SHOWN_MIN`] of its value and [`REST_ZERO_SIGMAS`] standard errors
+    /// away (`false` where no record starts at rest at 0 V).
+    pub fn shows_offset_at_rest(&self, model: &ModelFile) -> bool {
+        let fitted_v = model.offset.as_ref().map_or(0.0, |o| o.offset_v);
+        self.rest_zero_v.is_some_and(|(level_v, se_v)| {
+            fitted_v * level_v > 0.0
+                && level_v.abs() >= REST_ZERO_SHOWN_MIN * fitted_v.abs()
+                && level_v.abs() >= REST_ZERO_SIGMAS * se_v
+        })
     }
 
     /// The evidence for `effect` (as `model` has it) in words.
