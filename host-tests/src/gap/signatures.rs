@@ -62,10 +62,11 @@ pub struct Signatures {
     pub level_v: f64,
     /// Slope of that line (a scale error of the monitor), fraction.
     pub scale: f64,
-    /// The residual's mean over the records' first rest at 0 V input (from the first sample
-    /// until the input first moves, in records that start within [`REST_ZERO_INPUT_V`] of
-    /// 0 V) and the standard error of that mean, volts; `None` where no record starts so.
-    pub rest_zero_v: Option<(f64, f64)>,
+    /// Over the records' first rest at 0 V input (from the first sample until the input first
+    /// moves, in records that start within [`REST_ZERO_INPUT_V`] of 0 V): the residual's mean,
+    /// the measured output's mean and the standard error of a mean there, volts; `None` where
+    /// no record starts so.
+    pub rest_zero_v: Option<(f64, f64, f64)>,
     /// Noise floor, volts.
     pub noise_v: f64,
     /// Residual spectrum of the first fast record: (frequency Hz, magnitude V) for plots.
@@ -147,7 +148,7 @@ pub fn compute(data: &[Data], sims: &[Vec<f64>], noise: &[f64]) -> Signatures {
     // Sums of the residual's line against the simulated output (records weigh equally).
     let (mut s1, mut sx, mut sxx, mut sr, mut sxr) = (0.0, 0.0, 0.0, 0.0, 0.0);
     // Sums over the records' first rest at 0 V: residual, samples, noise variance.
-    let (mut rest_sum, mut rest_n, mut rest_var) = (0.0, 0usize, 0.0);
+    let (mut rest_sum, mut rest_y, mut rest_n, mut rest_var) = (0.0, 0.0, 0usize, 0.0);
     for (k, (d, y)) in data.iter().zip(sims).enumerate() {
         let r: Vec<f64> = d.y_v.iter().zip(y).map(|(a, b)| a - b).collect();
         if let Some(&u0) = d.u_v.first()
@@ -162,6 +163,7 @@ pub fn compute(data: &[Data], sims: &[Vec<f64>], noise: &[f64]) -> Signatures {
                 .unwrap_or(d.len())
                 .min(r.len());
             rest_sum += r[..end].iter().sum::<f64>();
+            rest_y += d.y_v[..end].iter().sum::<f64>();
             rest_n += end;
             rest_var += end as f64 * noise.get(k).map_or(0.0, |s| s * s);
         }
@@ -251,7 +253,7 @@ pub fn compute(data: &[Data], sims: &[Vec<f64>], noise: &[f64]) -> Signatures {
     }
     if rest_n > 0 {
         let n = rest_n as f64;
-        s.rest_zero_v = Some((rest_sum / n, rest_var.sqrt() / n));
+        s.rest_zero_v = Some((rest_sum / n, rest_y / n, rest_var.sqrt() / n));
     }
     s
 }
@@ -416,16 +418,21 @@ impl Signatures {
     }
 
     /// Does this residual, of a model without `model`'s fitted offset, show that offset over
-    /// the records' rest at 0 V input? Its mean there must sit on the constant's side of zero,
-    /// at least [`REST_ZERO_SHOWN_MIN`] of its value and [`REST_ZERO_SIGMAS`] standard errors
-    /// away (`false` where no record starts at rest at 0 V).
+    /// the records' rest at 0 V input, and does the sensor read it there? Both the residual's
+    /// mean and the measured output's mean there must sit on the constant's side of zero, at
+    /// least [`REST_ZERO_SHOWN_MIN`] of its value and [`REST_ZERO_SIGMAS`] standard errors
+    /// away (`false` where no record starts at rest at 0 V). The measured mean keeps a
+    /// constant that only corrects the model's own prediction at rest (a table whose range
+    /// reaches below 0 V holds a constant there) from passing for the sensor's zero.
     pub fn shows_offset_at_rest(&self, model: &ModelFile) -> bool {
         let fitted_v = model.offset.as_ref().map_or(0.0, |o| o.offset_v);
-        self.rest_zero_v.is_some_and(|(level_v, se_v)| {
+        let shows = |level_v: f64, se_v: f64| {
             fitted_v * level_v > 0.0
                 && level_v.abs() >= REST_ZERO_SHOWN_MIN * fitted_v.abs()
                 && level_v.abs() >= REST_ZERO_SIGMAS * se_v
-        })
+        };
+        self.rest_zero_v
+            .is_some_and(|(level_v, y_v, se_v)| shows(level_v, se_v) && shows(y_v, se_v))
     }
 
     /// The evidence for `effect` (as `model` has it) in words.
