@@ -1253,6 +1253,70 @@ fn drift_is_named_when_the_recorded_input_is_noisy() {
     assert!(*noisy_ratio <= 1.5, "{noisy_ratio}");
 }
 
+/// The full thesis stage with sensor offsets drawn at random (10-60 mV, either sign, seeds
+/// 31-36), on the identification protocol (40 s slow record), from `thesis-linear`: drawn
+/// after session 22's rest-at-0-V evidence was made on the four offsets of
+/// [`thesis_stage_with_a_sensor_offset_ends_near_the_floor`]. Both records start at rest at
+/// 0 V, where no catalogued effect but an offset moves the sensor. Asserted: the thesis' three
+/// slow effects named, nothing the truth lacks, the residual within 1.5x the floor (the
+/// issue's bar for `thesis-full`), and every offset that is named within 5 mV of the truth
+/// (two noise floors). Measured when drawn: +20.2, +26.1 and +56.8 mV named at 21.6, 27.8
+/// and 55.5 mV (1.02-1.03x); -40.2, -42.5 and -48.4 mV not named (1.17-1.24x): the table's
+/// relays below 0 V (its range reaches 0.5 V below the records) hold a negative constant at
+/// rest as well, so the rest does not show it (GAP.md, session 22).
+#[test]
+fn thesis_stage_offsets_drawn_at_random() {
+    let base = ModelFile::built_in("thesis-linear").unwrap();
+    let mut rng = rand::rngs::StdRng::seed_from_u64(2611);
+    let mut outcomes = Vec::new();
+    for seed in 31u64..=36 {
+        let offset_v = rng.gen_range(0.01..0.06) * if rng.gen_bool(0.5) { 1.0 } else { -1.0 };
+        let mut truth = ModelFile::built_in("thesis-full").unwrap();
+        truth.converters.seed = seed;
+        truth.offset = Some(host_tests::io::model_file::OffsetSection { offset_v });
+        let d = diagnose(&base, &protocol_data(&truth, 40.0), &Options::default()).unwrap();
+        let ratio = d.final_rms_v / d.noise_floor_v;
+        let fitted_v = d.model.offset.as_ref().map(|o| o.offset_v);
+        println!(
+            "offset {:+.1} mV (seed {seed}): named {:?}, fitted {}, final {ratio:.2}x the floor",
+            1e3 * offset_v,
+            d.named,
+            fitted_v.map_or("none".to_string(), |v| format!("{:+.1} mV", 1e3 * v))
+        );
+        outcomes.push((offset_v, d.named.clone(), ratio, fitted_v));
+    }
+    let named = outcomes.iter().filter(|o| o.3.is_some()).count();
+    println!("offset named on {named} of {}", outcomes.len());
+    for (offset_v, named, ratio, fitted_v) in &outcomes {
+        let at = format!("offset {:+.1} mV", 1e3 * offset_v);
+        for e in ["drift", "hysteresis", "nonlinear-gain"] {
+            assert!(
+                named.iter().any(|n| n == e),
+                "{at}: {e} not named: {named:?}"
+            );
+        }
+        let truth = [
+            "drift",
+            "hysteresis",
+            "nonlinear-gain",
+            "slew-rate-limit",
+            "offset",
+        ];
+        assert!(
+            named.iter().all(|n| truth.contains(&n.as_str())),
+            "{at}: a name the truth lacks: {named:?}"
+        );
+        assert!(*ratio <= 1.5, "{at}: final {ratio:.2}x the floor");
+        if let Some(v) = fitted_v {
+            assert!(
+                (v - offset_v).abs() <= 5e-3,
+                "{at}: fitted {:.1} mV",
+                1e3 * v
+            );
+        }
+    }
+}
+
 /// The full thesis stage with a sensor offset of another size than the demo's (issue #12
 /// item 3: an offset is the first effect a real lab meets), on the identification protocol
 /// (40 s slow record), from `thesis-linear`: the thesis' three slow effects named, nothing
@@ -1261,11 +1325,15 @@ fn drift_is_named_when_the_recorded_input_is_noisy() {
 /// and `sensor-gain` explained 82-85 % of the pooled residual each and neither was named,
 /// though the records told them apart one by one. Measured now: +18 mV 1.51x, +30 mV 2.18x,
 /// -25 mV 1.08x, +60 mV 4.14x, each with drift, hysteresis, nonlinear-gain and the slew
-/// limit; the offset itself is not named (the fitted table's constant takes it up, GAP.md),
-/// and where it is 30 mV or more the table says it cannot tell it from that constant
+/// limit; the offset itself was not named (the fitted table's constant takes it up, GAP.md),
+/// and where it was 30 mV or more the table said it cannot tell it from that constant
 /// (fitted at 33.2 and 59.0 mV for +30 and +60 mV).
 /// These offsets and seeds were drawn after the change was made on the demo's records
-/// shifted by +12 and +30 mV.
+/// shifted by +12 and +30 mV. Since session 22 the records' rest at 0 V input shows the
+/// offset (GAP.md): +18, +30 and +60 mV named at 20.3, 31.0 and 58.4 mV, 1.02-1.04x; -25 mV
+/// not (1.08x). Asserted since: the positive three named within 5 mV (two noise floors);
+/// session 22 was shaped on these four, so [`thesis_stage_offsets_drawn_at_random`] holds
+/// the evidence on offsets drawn after it.
 #[test]
 fn thesis_stage_with_a_sensor_offset_ends_near_the_floor() {
     let base = ModelFile::built_in("thesis-linear").unwrap();
@@ -1292,6 +1360,15 @@ fn thesis_stage_with_a_sensor_offset_ends_near_the_floor() {
                 "offset {:+.0} mV neither named nor reported: {:?}",
                 1e3 * offset_v,
                 d.cannot_tell
+            );
+        }
+        // The records start at rest at 0 V, where a positive offset shows (session 22).
+        if offset_v > 0.0 {
+            let fitted_v = d.model.offset.as_ref().map(|o| o.offset_v);
+            assert!(
+                fitted_v.is_some_and(|v| (v - offset_v).abs() <= 5e-3),
+                "offset {:+.0} mV: fitted {fitted_v:?}",
+                1e3 * offset_v
             );
         }
         outcomes.push((offset_v, d.named.clone(), ratio));

@@ -412,8 +412,8 @@ impl Signatures {
     /// other effects.
     pub fn shows_offset(&self, model: &ModelFile) -> bool {
         let fitted_v = model.offset.as_ref().map_or(0.0, |o| o.offset_v);
-        let line =
-            fitted_v * self.level_v > 0.0 && self.level_v.abs() >= OFFSET_SHOWN_MIN * fitted_v.abs();
+        let line = fitted_v * self.level_v > 0.0
+            && self.level_v.abs() >= OFFSET_SHOWN_MIN * fitted_v.abs();
         line || self.shows_offset_at_rest(model)
     }
 
@@ -515,6 +515,57 @@ mod tests {
         )
         .unwrap();
         (d, r)
+    }
+
+    /// The rest at 0 V shows an offset where the sensor reads it there and the model without
+    /// it leaves it there, and not where either sits at zero: a record that starts at rest at
+    /// 0 V for 100 samples, then steps to 5 V, measured with a 20 mV offset (or without) and
+    /// a model that predicts either nothing or the offset at rest. The means are exact (no
+    /// noise, a 1 mV noise level for the standard error), so the cut between 0.5 and 1.0 of
+    /// the fitted 20 mV cannot be missed by rounding.
+    #[test]
+    fn the_rest_at_zero_volts_shows_a_sensor_offset_only() {
+        let n = 400;
+        let t: Vec<f64> = (0..n).map(|i| i as f64 * 1e-3).collect();
+        let u: Vec<f64> = (0..n).map(|i| if i < 100 { 0.0 } else { 5.0 }).collect();
+        let record = |offset_v: f64| {
+            let y: Vec<f64> = u.iter().map(|x| x + offset_v).collect();
+            Data::from_record(
+                "rest.csv",
+                Record::new(t.clone(), u.clone(), Some(y), None).unwrap(),
+            )
+            .unwrap()
+        };
+        let mut model = ModelFile::built_in("thesis-linear").unwrap();
+        model.offset = Some(crate::io::model_file::OffsetSection { offset_v: 0.02 });
+        // The model without the offset predicts the input alone.
+        let plain: Vec<f64> = u.clone();
+        // ... or carries the constant at rest itself (a table's own constant below 0 V).
+        let at_rest: Vec<f64> = u.iter().map(|x| x + 0.02).collect();
+        let sigs =
+            |offset_v: f64, sim: &[f64]| compute(&[record(offset_v)], &[sim.to_vec()], &[1e-3]);
+        let shown = sigs(0.02, &plain);
+        let (level_v, y_v, se_v) = shown.rest_zero_v.unwrap();
+        assert!(
+            (level_v - 0.02).abs() < 1e-12 && (y_v - 0.02).abs() < 1e-12,
+            "{level_v} {y_v}"
+        );
+        assert!((se_v - 1e-4).abs() < 1e-12, "{se_v}");
+        assert!(shown.shows_offset_at_rest(&model));
+        // The sensor reads zero at rest: the constant is not the sensor's.
+        assert!(!sigs(0.0, &plain).shows_offset_at_rest(&model));
+        // The model without the offset already predicts the reading at rest.
+        assert!(!sigs(0.02, &at_rest).shows_offset_at_rest(&model));
+        // The other sign of zero.
+        assert!(!sigs(-0.02, &plain).shows_offset_at_rest(&model));
+        // A record that does not start at 0 V has no rest at 0 V.
+        let lifted: Vec<f64> = u.iter().map(|x| x + 1.0).collect();
+        let d = Data::from_record(
+            "lifted.csv",
+            Record::new(t.clone(), lifted.clone(), Some(lifted.clone()), None).unwrap(),
+        )
+        .unwrap();
+        assert!(compute(&[d], &[lifted], &[1e-3]).rest_zero_v.is_none());
     }
 
     /// The held levels' loop finds the direction's gap (2 g) beside a static quadratic, finds
