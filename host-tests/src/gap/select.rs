@@ -9,8 +9,8 @@
 use super::catalogue::{self, EFFECTS, FAST, SLOW};
 use super::constants::{
     CANDIDATE_ROUNDS, CANNOT_TELL_RATIO, HOLD_MIN_S, MAX_STEPS, MIN_EXPLAINED, PAIR_FLOOR_RATIO,
-    PRUNE_KEEP_EXCESS_VAR, PRUNE_PER_PARAM, PRUNE_RATIO, STATIC_TELL_RATIO, STOP_FLOOR_RATIO,
-    STRUCTURE_ROUNDS,
+    PRUNE_KEEP_EXCESS_VAR, PRUNE_PER_PARAM, PRUNE_RATIO, REST_ZERO_SHOWN_MIN, REST_ZERO_SIGMAS,
+    STATIC_TELL_RATIO, STOP_FLOOR_RATIO, STRUCTURE_ROUNDS,
 };
 use super::data::{Data, min_max, mse, noise_floor, sim, simulate_all};
 use super::everett::CentreLine;
@@ -211,6 +211,62 @@ pub struct CannotTell {
     pub neither_named: bool,
     /// Why, and what record would tell them apart.
     pub why: String,
+}
+
+/// A sensor that reads off zero over the records' rest at 0 V input, where the fitted model
+/// predicts that reading without an offset (at least [`REST_ZERO_SHOWN_MIN`] of it; with the
+/// table named and no offset): the table's relays below the records' inputs (its range
+/// reaches below them) or its start memory hold the constant, and the records cannot tell it
+/// from a sensor offset. Reported with the reading and what the model with an offset fitted
+/// beside the table leaves, when the reading is at least one noise floor (a level a single
+/// sample shows) and [`REST_ZERO_SIGMAS`] standard errors of its mean.
+#[allow(clippy::too_many_arguments)] // the selection's state, passed as it stands
+fn rest_reading_held_by_the_table(
+    model: &ModelFile,
+    named: &[String],
+    data: &[Data],
+    sims: &[Vec<f64>],
+    noise: &[f64],
+    noise_floor_v: f64,
+    slow_x: &SlowRegressors,
+    u_range: (f64, f64),
+    cur_mse: &[f64],
+) -> Option<CannotTell> {
+    if !named.iter().any(|n| n == "hysteresis")
+        || named.iter().any(|n| n == "offset")
+        || catalogue::present(model, "offset")
+    {
+        return None;
+    }
+    let (level_v, y_v, se_v) = signatures::compute(data, sims, noise).rest_zero_v?;
+    if y_v.abs() < noise_floor_v.max(REST_ZERO_SIGMAS * se_v)
+        || level_v.abs() >= REST_ZERO_SHOWN_MIN * y_v.abs()
+    {
+        return None;
+    }
+    let with = refit_slow(model, &["offset"], data, slow_x, u_range)?;
+    let (_, ms) = simulate_all(&with, data).ok()?;
+    let fitted_v = with.offset.as_ref().map_or(0.0, |o| o.offset_v);
+    Some(CannotTell {
+        named: "hysteresis".into(),
+        alternative: "offset".into(),
+        neither_named: false,
+        rms_v: rms_of(cur_mse),
+        alternative_rms_v: rms_of(&ms),
+        why: format!(
+            "the sensor reads {:.1} mV over the records' rest at 0 V input, and the model \
+             predicts {:.1} mV there without an offset: the table's relays below the records' \
+             inputs, or its start memory, hold that constant; an offset fitted beside the \
+             table ({:.1} mV) leaves {:.2} mV against {:.2} mV; records whose input goes \
+             below 0 V before the rest, down to where the table's range ends, tell a sensor \
+             offset from them",
+            1e3 * y_v,
+            1e3 * (y_v - level_v),
+            1e3 * fitted_v,
+            1e3 * rms_of(&ms),
+            1e3 * rms_of(cur_mse)
+        ),
+    })
 }
 
 /// The pairs the issue names (#12 item 1): without holds, a drift lag and a hysteresis loop
@@ -1131,6 +1187,22 @@ fn diagnose_split(
         }
     });
     cannot_tell.extend(ambiguous);
+    if let Some(c) = rest_reading_held_by_the_table(
+        &model,
+        &named,
+        data,
+        &sims,
+        &noise,
+        noise_floor_v,
+        &slow_x,
+        u_range,
+        &cur_mse,
+    ) && !cannot_tell
+        .iter()
+        .any(|k| k.named == c.named && k.alternative == c.alternative)
+    {
+        cannot_tell.push(c);
+    }
     let unexplained = locate(data, &sims, &noise);
     let final_rms_v = (cur_mse.iter().sum::<f64>() / cur_mse.len() as f64).sqrt();
     Ok(Diagnosis {
