@@ -1253,26 +1253,31 @@ fn drift_is_named_when_the_recorded_input_is_noisy() {
     assert!(*noisy_ratio <= 1.5, "{noisy_ratio}");
 }
 
-/// The full thesis stage with sensor offsets drawn at random (10-60 mV, either sign, seeds
-/// 31-36), on the identification protocol (40 s slow record), from `thesis-linear`: drawn
-/// after session 22's rest-at-0-V evidence was made on the four offsets of
-/// [`thesis_stage_with_a_sensor_offset_ends_near_the_floor`]. Both records start at rest at
-/// 0 V, where no catalogued effect but an offset moves the sensor. Asserted: the thesis' three
-/// slow effects named, nothing the truth lacks, the residual within 1.5x the floor (the
-/// issue's bar for `thesis-full`), and every offset that is named within 5 mV of the truth
-/// (two noise floors). Measured when drawn: +20.2, +26.1 and +56.8 mV named at 21.6, 27.8
-/// and 55.5 mV (1.02-1.03x); -40.2, -42.5 and -48.4 mV not named (1.17-1.24x): the table's
-/// relays below 0 V (its range reaches 0.5 V below the records) hold a negative constant at
-/// rest as well, so the rest does not show it (GAP.md, session 22). Asserted too: an offset
-/// not named is reported in `cannot_tell` (hysteresis / offset) with the sensor's reading at
-/// rest.
+/// The full thesis stage with sensor offsets drawn at random (10-60 mV, either sign), on the
+/// identification protocol (40 s slow record), from `thesis-linear`. Both records start at
+/// rest at 0 V, where no catalogued effect but an offset moves the sensor (GAP.md, session
+/// 22). Two draws: seeds 31-36 (rng 2611), drawn after the rest's evidence in the final check
+/// was made on the four offsets of [`thesis_stage_with_a_sensor_offset_ends_near_the_floor`]
+/// (its negatives then went unnamed here, which shaped the naming rule that followed), and
+/// seeds 41-46 (rng 2612), drawn before that rule was run on them. Asserted: the thesis'
+/// three slow effects and the offset named, nothing the truth lacks, the offset within 5 mV
+/// of the truth (two noise floors), the residual within 1.5x the floor (the bar for
+/// `thesis-full`). Measured on 41-46 when drawn: +45.1, +22.2, +23.5, -45.7, -28.8 and
+/// +49.9 mV fitted at +46.7, +22.4, +24.9, -44.3, -27.4 and +48.5 mV, 1.01-1.05x the floor.
 #[test]
 fn thesis_stage_offsets_drawn_at_random() {
     let base = ModelFile::built_in("thesis-linear").unwrap();
-    let mut rng = rand::rngs::StdRng::seed_from_u64(2611);
+    let mut cases = Vec::new();
+    for (rng_seed, seeds) in [(2611u64, 31u64..=36), (2612, 41..=46)] {
+        let mut rng = rand::rngs::StdRng::seed_from_u64(rng_seed);
+        for seed in seeds {
+            let size_v = rng.gen_range(0.01..0.06);
+            let sign = if rng.gen_bool(0.5) { 1.0 } else { -1.0 };
+            cases.push((seed, size_v * sign));
+        }
+    }
     let mut outcomes = Vec::new();
-    for seed in 31u64..=36 {
-        let offset_v = rng.gen_range(0.01..0.06) * if rng.gen_bool(0.5) { 1.0 } else { -1.0 };
+    for (seed, offset_v) in cases {
         let mut truth = ModelFile::built_in("thesis-full").unwrap();
         truth.converters.seed = seed;
         truth.offset = Some(host_tests::io::model_file::OffsetSection { offset_v });
@@ -1285,28 +1290,13 @@ fn thesis_stage_offsets_drawn_at_random() {
             d.named,
             fitted_v.map_or("none".to_string(), |v| format!("{:+.1} mV", 1e3 * v))
         );
-        // Never silent: an offset not named is reported as one the records cannot tell from
-        // the table's constant, with the sensor's reading at rest.
-        let reported = d
-            .cannot_tell
-            .iter()
-            .find(|c| c.named == "hysteresis" && c.alternative == "offset");
-        if let Some(c) = reported {
-            println!("  cannot tell: {}", c.why);
-        }
-        assert!(
-            fitted_v.is_some() || reported.is_some(),
-            "offset {:+.1} mV neither named nor reported: {:?}",
-            1e3 * offset_v,
-            d.cannot_tell
-        );
         outcomes.push((offset_v, d.named.clone(), ratio, fitted_v));
     }
     let named = outcomes.iter().filter(|o| o.3.is_some()).count();
     println!("offset named on {named} of {}", outcomes.len());
     for (offset_v, named, ratio, fitted_v) in &outcomes {
         let at = format!("offset {:+.1} mV", 1e3 * offset_v);
-        for e in ["drift", "hysteresis", "nonlinear-gain"] {
+        for e in ["drift", "hysteresis", "nonlinear-gain", "offset"] {
             assert!(
                 named.iter().any(|n| n == e),
                 "{at}: {e} not named: {named:?}"
@@ -1324,13 +1314,10 @@ fn thesis_stage_offsets_drawn_at_random() {
             "{at}: a name the truth lacks: {named:?}"
         );
         assert!(*ratio <= 1.5, "{at}: final {ratio:.2}x the floor");
-        if let Some(v) = fitted_v {
-            assert!(
-                (v - offset_v).abs() <= 5e-3,
-                "{at}: fitted {:.1} mV",
-                1e3 * v
-            );
-        }
+        assert!(
+            fitted_v.is_some_and(|v| (v - offset_v).abs() <= 5e-3),
+            "{at}: fitted {fitted_v:?}"
+        );
     }
 }
 
@@ -1347,10 +1334,11 @@ fn thesis_stage_offsets_drawn_at_random() {
 /// (fitted at 33.2 and 59.0 mV for +30 and +60 mV).
 /// These offsets and seeds were drawn after the change was made on the demo's records
 /// shifted by +12 and +30 mV. Since session 22 the records' rest at 0 V input shows the
-/// offset (GAP.md): +18, +30 and +60 mV named at 20.3, 31.0 and 58.4 mV, 1.02-1.04x; -25 mV
-/// not (1.08x). Asserted since: the positive three named within 5 mV (two noise floors);
-/// session 22 was shaped on these four, so [`thesis_stage_offsets_drawn_at_random`] holds
-/// the evidence on offsets drawn after it.
+/// offset (GAP.md): +18, +30 and +60 mV named at 20.3, 31.0 and 58.4 mV in the final check,
+/// and -25 mV, which the table's own constant at rest took up, by the reading at rest, at
+/// -24.3 mV (1.02-1.04x). Asserted since: each named within 5 mV (two noise floors); session
+/// 22 was shaped on these four, so [`thesis_stage_offsets_drawn_at_random`] holds the
+/// evidence on offsets drawn after it.
 #[test]
 fn thesis_stage_with_a_sensor_offset_ends_near_the_floor() {
     let base = ModelFile::built_in("thesis-linear").unwrap();
@@ -1380,15 +1368,13 @@ fn thesis_stage_with_a_sensor_offset_ends_near_the_floor() {
                 d.cannot_tell
             );
         }
-        // The records start at rest at 0 V, where a positive offset shows (session 22).
-        if offset_v > 0.0 {
-            let fitted_v = d.model.offset.as_ref().map(|o| o.offset_v);
-            assert!(
-                fitted_v.is_some_and(|v| (v - offset_v).abs() <= 5e-3),
-                "offset {:+.0} mV: fitted {fitted_v:?}",
-                1e3 * offset_v
-            );
-        }
+        // The records start at rest at 0 V, where the offset shows (session 22).
+        let fitted_v = d.model.offset.as_ref().map(|o| o.offset_v);
+        assert!(
+            fitted_v.is_some_and(|v| (v - offset_v).abs() <= 5e-3),
+            "offset {:+.0} mV: fitted {fitted_v:?}",
+            1e3 * offset_v
+        );
         outcomes.push((offset_v, d.named.clone(), ratio));
     }
     for (offset_v, named, ratio) in &outcomes {

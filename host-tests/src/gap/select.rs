@@ -213,13 +213,27 @@ pub struct CannotTell {
     pub why: String,
 }
 
-/// A sensor that reads off zero over the records' rest at 0 V input, where the fitted model
-/// predicts that reading without an offset (at least [`REST_ZERO_SHOWN_MIN`] of it; with the
-/// table named and no offset): the table's relays below the records' inputs (its range
-/// reaches below them) or its start memory hold the constant, and the records cannot tell it
-/// from a sensor offset. Reported with the reading and what the model with an offset fitted
-/// beside the table leaves, when the reading is at least one noise floor (a level a single
-/// sample shows) and [`REST_ZERO_SIGMAS`] standard errors of its mean.
+/// An offset fitted in the place of the table's constant at rest at 0 V
+/// ([`rest_reading_held_by_the_table`]).
+struct RestReading {
+    /// The model with the offset, its slow effects refitted.
+    with: ModelFile,
+    sims: Vec<Vec<f64>>,
+    mse: Vec<f64>,
+    reading_v: f64,
+    predicted_v: f64,
+}
+
+/// The sensor's reading over the records' rest at 0 V input, where the fitted model predicts
+/// it without an offset (at least [`REST_ZERO_SHOWN_MIN`] of it), with the table named and no
+/// offset: the table's relays below the records' inputs (its range reaches below them) or
+/// its start memory took up a constant there. At rest at 0 V no other catalogued effect moves
+/// the sensor (a scale, `K'(u) u` and a settled drift all vanish), and the thesis' table ends
+/// at 0 V, where its memory is wiped: the reading there is the sensor's zero. Returned where
+/// the reading is at least one noise floor (a level a single sample shows) and
+/// [`REST_ZERO_SIGMAS`] standard errors of its mean: the model with an offset refitted beside
+/// the table, its simulations and residual powers, and the reading and the model's prediction
+/// at rest, volts.
 #[allow(clippy::too_many_arguments)] // the selection's state, passed as it stands
 fn rest_reading_held_by_the_table(
     model: &ModelFile,
@@ -230,8 +244,7 @@ fn rest_reading_held_by_the_table(
     noise_floor_v: f64,
     slow_x: &SlowRegressors,
     u_range: (f64, f64),
-    cur_mse: &[f64],
-) -> Option<CannotTell> {
+) -> Option<RestReading> {
     if !named.iter().any(|n| n == "hysteresis")
         || named.iter().any(|n| n == "offset")
         || catalogue::present(model, "offset")
@@ -245,27 +258,13 @@ fn rest_reading_held_by_the_table(
         return None;
     }
     let with = refit_slow(model, &["offset"], data, slow_x, u_range)?;
-    let (_, ms) = simulate_all(&with, data).ok()?;
-    let fitted_v = with.offset.as_ref().map_or(0.0, |o| o.offset_v);
-    Some(CannotTell {
-        named: "hysteresis".into(),
-        alternative: "offset".into(),
-        neither_named: false,
-        rms_v: rms_of(cur_mse),
-        alternative_rms_v: rms_of(&ms),
-        why: format!(
-            "the sensor reads {:.1} mV over the records' rest at 0 V input, and the model \
-             predicts {:.1} mV there without an offset: the table's relays below the records' \
-             inputs, or its start memory, hold that constant; an offset fitted beside the \
-             table ({:.1} mV) leaves {:.2} mV against {:.2} mV; records whose input goes \
-             below 0 V before the rest, down to where the table's range ends, tell a sensor \
-             offset from them",
-            1e3 * y_v,
-            1e3 * (y_v - level_v),
-            1e3 * fitted_v,
-            1e3 * rms_of(&ms),
-            1e3 * rms_of(cur_mse)
-        ),
+    let (sims, mse) = simulate_all(&with, data).ok()?;
+    Some(RestReading {
+        with,
+        sims,
+        mse,
+        reading_v: y_v,
+        predicted_v: y_v - level_v,
     })
 }
 
@@ -1187,7 +1186,10 @@ fn diagnose_split(
         }
     });
     cannot_tell.extend(ambiguous);
-    if let Some(c) = rest_reading_held_by_the_table(
+    // The sensor's reading at rest at 0 V, taken up by the table's own constant there: an
+    // offset in its place that leaves no more is named (the reading at 0 V is the sensor's
+    // zero); one that leaves more is reported as a pair the records cannot tell.
+    if let Some(r) = rest_reading_held_by_the_table(
         &model,
         &named,
         data,
@@ -1196,12 +1198,58 @@ fn diagnose_split(
         noise_floor_v,
         &slow_x,
         u_range,
-        &cur_mse,
-    ) && !cannot_tell
-        .iter()
-        .any(|k| k.named == c.named && k.alternative == c.alternative)
-    {
-        cannot_tell.push(c);
+    ) {
+        let fitted_v = r.with.offset.as_ref().map_or(0.0, |o| o.offset_v);
+        let (rms_v, with_rms_v) = (rms_of(&cur_mse), rms_of(&r.mse));
+        let reading = format!(
+            "the sensor reads {:.1} mV over the records' rest at 0 V input, where no other \
+             effect moves it, and the model without an offset predicts {:.1} mV there (the \
+             table's relays below the records' inputs, or its start memory, hold that \
+             constant)",
+            1e3 * r.reading_v,
+            1e3 * r.predicted_v
+        );
+        if with_rms_v <= rms_v {
+            steps.push(Step {
+                params: params_json(&r.with, "offset"),
+                ..Step::new(
+                    "offset".into(),
+                    format!(
+                        "{reading}; an offset in the table's place ({:.1} mV) leaves {:.2} mV \
+                         against {:.2} mV",
+                        1e3 * fitted_v,
+                        1e3 * with_rms_v,
+                        1e3 * rms_v
+                    ),
+                    &cur_mse,
+                    &r.mse,
+                    r.sims.clone(),
+                )
+            });
+            named.push("offset".into());
+            model = r.with;
+            sims = r.sims;
+            cur_mse = r.mse;
+        } else if !cannot_tell
+            .iter()
+            .any(|k| k.named == "hysteresis" && k.alternative == "offset")
+        {
+            cannot_tell.push(CannotTell {
+                named: "hysteresis".into(),
+                alternative: "offset".into(),
+                neither_named: false,
+                rms_v,
+                alternative_rms_v: with_rms_v,
+                why: format!(
+                    "{reading}; an offset fitted beside the table ({:.1} mV) leaves {:.2} mV \
+                     against {:.2} mV; records whose input goes below 0 V before the rest, \
+                     down to where the table's range ends, tell a sensor offset from it",
+                    1e3 * fitted_v,
+                    1e3 * with_rms_v,
+                    1e3 * rms_v
+                ),
+            });
+        }
     }
     let unexplained = locate(data, &sims, &noise);
     let final_rms_v = (cur_mse.iter().sum::<f64>() / cur_mse.len() as f64).sqrt();
