@@ -214,7 +214,7 @@ pub struct CannotTell {
 }
 
 /// An offset fitted in the place of the table's constant at rest at 0 V
-/// ([`rest_reading_held_by_the_table`]).
+/// ([`rest_reading`]).
 struct RestReading {
     /// The model with the offset, its slow effects refitted.
     with: ModelFile,
@@ -224,18 +224,18 @@ struct RestReading {
     predicted_v: f64,
 }
 
-/// The sensor's reading over the records' rest at 0 V input, where the fitted model predicts
-/// it without an offset (at least [`REST_ZERO_SHOWN_MIN`] of it), with the table named and no
-/// offset: the table's relays below the records' inputs (its range reaches below them) or
-/// its start memory took up a constant there. At rest at 0 V no other catalogued effect moves
-/// the sensor (a scale, `K'(u) u` and a settled drift all vanish), and the thesis' table ends
-/// at 0 V, where its memory is wiped: the reading there is the sensor's zero. Returned where
-/// the reading is at least one noise floor (a level a single sample shows) and
-/// [`REST_ZERO_SIGMAS`] standard errors of its mean: the model with an offset refitted beside
-/// the table, its simulations and residual powers, and the reading and the model's prediction
-/// at rest, volts.
+/// The sensor's reading over the records' rest at 0 V input, with no offset named: at rest
+/// at 0 V no other catalogued effect moves the sensor (a scale, `K'(u) u` and a settled drift
+/// all vanish), and the thesis' table ends at 0 V, where its memory is wiped, so the reading
+/// there is the sensor's zero. The model may leave it in the residual there (a step's share
+/// of the residual power is too small to add an offset for a few hundred samples of a long
+/// record) or predict it (the table's relays below the records' inputs, its range reaching
+/// below them, or its start memory, hold a constant there). Returned where the reading is at
+/// least one noise floor (a level a single sample shows) and [`REST_ZERO_SIGMAS`] standard
+/// errors of its mean: the model with an offset refitted beside the others, its simulations
+/// and residual powers, and the reading and the model's prediction at rest, volts.
 #[allow(clippy::too_many_arguments)] // the selection's state, passed as it stands
-fn rest_reading_held_by_the_table(
+fn rest_reading(
     model: &ModelFile,
     named: &[String],
     data: &[Data],
@@ -245,16 +245,11 @@ fn rest_reading_held_by_the_table(
     slow_x: &SlowRegressors,
     u_range: (f64, f64),
 ) -> Option<RestReading> {
-    if !named.iter().any(|n| n == "hysteresis")
-        || named.iter().any(|n| n == "offset")
-        || catalogue::present(model, "offset")
-    {
+    if named.iter().any(|n| n == "offset") || catalogue::present(model, "offset") {
         return None;
     }
     let (level_v, y_v, se_v) = signatures::compute(data, sims, noise).rest_zero_v?;
-    if y_v.abs() < noise_floor_v.max(REST_ZERO_SIGMAS * se_v)
-        || level_v.abs() >= REST_ZERO_SHOWN_MIN * y_v.abs()
-    {
+    if y_v.abs() < noise_floor_v.max(REST_ZERO_SIGMAS * se_v) {
         return None;
     }
     let with = refit_slow(model, &["offset"], data, slow_x, u_range)?;
@@ -1186,10 +1181,11 @@ fn diagnose_split(
         }
     });
     cannot_tell.extend(ambiguous);
-    // The sensor's reading at rest at 0 V, taken up by the table's own constant there: an
-    // offset in its place that leaves no more is named (the reading at 0 V is the sensor's
-    // zero); one that leaves more is reported as a pair the records cannot tell.
-    if let Some(r) = rest_reading_held_by_the_table(
+    // The sensor's reading at rest at 0 V with no offset named: an offset that leaves no more
+    // is named (the reading at 0 V is the sensor's zero); where the table's own constant took
+    // the reading up and the offset leaves more, the two are reported as a pair the records
+    // cannot tell.
+    if let Some(r) = rest_reading(
         &model,
         &named,
         data,
@@ -1201,13 +1197,19 @@ fn diagnose_split(
     ) {
         let fitted_v = r.with.offset.as_ref().map_or(0.0, |o| o.offset_v);
         let (rms_v, with_rms_v) = (rms_of(&cur_mse), rms_of(&r.mse));
+        let held = r.predicted_v * r.reading_v > 0.0
+            && r.predicted_v.abs() >= REST_ZERO_SHOWN_MIN * r.reading_v.abs();
         let reading = format!(
             "the sensor reads {:.1} mV over the records' rest at 0 V input, where no other \
-             effect moves it, and the model without an offset predicts {:.1} mV there (the \
-             table's relays below the records' inputs, or its start memory, hold that \
-             constant)",
+             effect moves it, and the model without an offset predicts {:.1} mV there{}",
             1e3 * r.reading_v,
-            1e3 * r.predicted_v
+            1e3 * r.predicted_v,
+            if held {
+                " (the table's relays below the records' inputs, or its start memory, hold \
+                 that constant)"
+            } else {
+                ""
+            }
         );
         if with_rms_v <= rms_v {
             steps.push(Step {
@@ -1230,9 +1232,11 @@ fn diagnose_split(
             model = r.with;
             sims = r.sims;
             cur_mse = r.mse;
-        } else if !cannot_tell
-            .iter()
-            .any(|k| k.named == "hysteresis" && k.alternative == "offset")
+        } else if held
+            && named.iter().any(|n| n == "hysteresis")
+            && !cannot_tell
+                .iter()
+                .any(|k| k.named == "hysteresis" && k.alternative == "offset")
         {
             cannot_tell.push(CannotTell {
                 named: "hysteresis".into(),
