@@ -1296,24 +1296,7 @@ fn thesis_stage_offsets_drawn_at_random() {
     println!("offset named on {named} of {}", outcomes.len());
     for (offset_v, named, ratio, fitted_v) in &outcomes {
         let at = format!("offset {:+.1} mV", 1e3 * offset_v);
-        for e in ["drift", "hysteresis", "nonlinear-gain", "offset"] {
-            assert!(
-                named.iter().any(|n| n == e),
-                "{at}: {e} not named: {named:?}"
-            );
-        }
-        let truth = [
-            "drift",
-            "hysteresis",
-            "nonlinear-gain",
-            "slew-rate-limit",
-            "offset",
-        ];
-        assert!(
-            named.iter().all(|n| truth.contains(&n.as_str())),
-            "{at}: a name the truth lacks: {named:?}"
-        );
-        assert!(*ratio <= 1.5, "{at}: final {ratio:.2}x the floor");
+        assert_thesis_stage_with_offset_named(&at, named, *ratio);
         assert!(
             fitted_v.is_some_and(|v| (v - offset_v).abs() <= 5e-3),
             "{at}: fitted {fitted_v:?}"
@@ -1323,8 +1306,9 @@ fn thesis_stage_offsets_drawn_at_random() {
 
 /// The full thesis stage with a sensor offset of another size than the demo's (issue #12
 /// item 3: an offset is the first effect a real lab meets), on the identification protocol
-/// (40 s slow record), from `thesis-linear`: the thesis' three slow effects named, nothing
-/// the truth lacks, and the residual within 5x the floor. Before session 21 the offsets of
+/// (40 s slow record), from `thesis-linear`: the thesis' three slow effects and the offset
+/// named (within 5 mV, two noise floors), nothing the truth lacks, and the residual within
+/// 1.5x the floor (5x until session 22). Before session 21 the offsets of
 /// +30 and +60 mV ended at 19.5x and 19.2x with drift and hysteresis alone: `nonlinear-gain`
 /// and `sensor-gain` explained 82-85 % of the pooled residual each and neither was named,
 /// though the records told them apart one by one. Measured now: +18 mV 1.51x, +30 mV 2.18x,
@@ -1336,9 +1320,8 @@ fn thesis_stage_offsets_drawn_at_random() {
 /// shifted by +12 and +30 mV. Since session 22 the records' rest at 0 V input shows the
 /// offset (GAP.md): +18, +30 and +60 mV named at 20.3, 31.0 and 58.4 mV in the final check,
 /// and -25 mV, which the table's own constant at rest took up, by the reading at rest, at
-/// -24.3 mV (1.02-1.04x). Asserted since: each named within 5 mV (two noise floors); session
-/// 22 was shaped on these four, so [`thesis_stage_offsets_drawn_at_random`] holds the
-/// evidence on offsets drawn after it.
+/// -24.3 mV (1.02-1.04x). Session 22 was shaped on these four, so
+/// [`thesis_stage_offsets_drawn_at_random`] holds the evidence on offsets drawn after it.
 #[test]
 fn thesis_stage_with_a_sensor_offset_ends_near_the_floor() {
     let base = ModelFile::built_in("thesis-linear").unwrap();
@@ -1385,24 +1368,32 @@ fn thesis_stage_with_a_sensor_offset_ends_near_the_floor() {
     }
     for (offset_v, named, ratio) in &outcomes {
         let at = format!("offset {:+.0} mV", 1e3 * offset_v);
-        for e in ["drift", "hysteresis", "nonlinear-gain"] {
-            assert!(
-                named.iter().any(|n| n == e),
-                "{at}: {e} not named: {named:?}"
-            );
-        }
-        let truth = [
-            "drift",
-            "hysteresis",
-            "nonlinear-gain",
-            "slew-rate-limit",
-            "saturation",
-            "offset",
-        ];
-        assert!(
-            named.iter().all(|n| truth.contains(&n.as_str())),
-            "{at}: a name the truth lacks: {named:?}"
-        );
-        assert!(*ratio <= 5.0, "{at}: final {ratio:.2}x the floor");
+        assert_thesis_stage_with_offset_named(&at, named, *ratio);
     }
+}
+
+/// The full thesis stage with a sensor offset, diagnosed from `thesis-linear`: its three slow
+/// effects and the offset named, nothing the truth lacks (its slew limit and amplifier
+/// saturation may show), and the residual within 1.5x the floor (the issue's bar for
+/// `thesis-full`).
+fn assert_thesis_stage_with_offset_named(at: &str, named: &[String], ratio: f64) {
+    for e in ["drift", "hysteresis", "nonlinear-gain", "offset"] {
+        assert!(
+            named.iter().any(|n| n == e),
+            "{at}: {e} not named: {named:?}"
+        );
+    }
+    let truth = [
+        "drift",
+        "hysteresis",
+        "nonlinear-gain",
+        "slew-rate-limit",
+        "saturation",
+        "offset",
+    ];
+    assert!(
+        named.iter().all(|n| truth.contains(&n.as_str())),
+        "{at}: a name the truth lacks: {named:?}"
+    );
+    assert!(ratio <= 1.5, "{at}: final {ratio:.2}x the floor");
 }
