@@ -124,12 +124,17 @@ pub const DRIFT_TAIL_MIN_NOISE: f64 = 3.0;
 /// or a creep's start 0.003-0.063 (the other side of zero in hidden-effect case 1038); 0.12
 /// is the geometric middle of 0.063 and 0.24.
 pub const OFFSET_SHOWN_MIN: f64 = 0.12;
-/// A record whose input starts within this of 0 V and stays there for a while starts **at
-/// rest at 0 V**: there every catalogued effect but `offset` predicts no output (a scale, a
-/// curvature `K'(u) u` and a settled drift `w(0)` all vanish at 0 V), so the residual of a
-/// model without the offset shows the sensor's zero directly (our assumption: 10 mV, a tenth
-/// of a per cent of the range, moves a 5 % scale error by 0.5 mV, under the noise).
-pub const REST_ZERO_INPUT_V: f64 = 0.01;
+/// A record whose input stays within this of 0 V from its first sample for at least
+/// [`REST_ZERO_MIN_S`] starts **at rest at 0 V**: there every catalogued effect but `offset`
+/// predicts no output (a scale, a curvature `K'(u) u` and a settled drift `w(0)` all vanish at
+/// 0 V), so the sensor's reading there is its zero (our assumption: 1 mV, at which the
+/// plant's static gain of 0.79 moves the sensor by 0.8 mV, under a noise floor of 1 mV or
+/// more; an input measured with more noise than that leaves no rest, and no evidence).
+pub const REST_ZERO_INPUT_V: f64 = 1e-3;
+/// Shortest rest at 0 V that counts ([`REST_ZERO_INPUT_V`]), seconds (our assumption: twice
+/// the thesis' plant's settling of about 1 ms; an input that passes through 0 V, or a cut of
+/// a record from a moving stage, stays there for less).
+pub const REST_ZERO_MIN_S: f64 = 2e-3;
 /// Share of a fitted `offset` that the residual without it must show over the records' rest
 /// at 0 V ([`REST_ZERO_INPUT_V`]), on the same side of zero and beyond
 /// [`REST_ZERO_SIGMAS`] standard errors of its mean, for the final check to keep it where
@@ -138,7 +143,10 @@ pub const REST_ZERO_INPUT_V: f64 = 0.01;
 /// lenient bar; a constant that only mopped up another effect's misfit shows nothing there).
 pub const REST_ZERO_SHOWN_MIN: f64 = 0.5;
 /// Standard errors of the mean the rest level must stand beyond ([`REST_ZERO_SHOWN_MIN`];
-/// our assumption: three, a one-sided chance of about 1e-3 for noise alone).
+/// our assumption: three, a one-sided chance of about 1e-3 for noise alone). The standard
+/// error takes the noise as white at each record's floor (its differences' estimate): a
+/// sensor whose noise is coloured (1/f, a low-pass) has a larger one, which the reading's
+/// other bar, one noise floor, covers in part.
 pub const REST_ZERO_SIGMAS: f64 = 3.0;
 
 /// Shortest run of constant input that counts as a hold, seconds (our assumption: long enough

@@ -4,7 +4,8 @@
 //! one, repeat until the residual reaches the noise floor; then the final check takes back out
 //! every named effect that does not earn its place ([`super::constants::PRUNE_RATIO`]), the
 //! slow effects are refitted once more with every named effect in place, and the swaps try
-//! each named slow effect's look-alikes (step 7 of the loop).
+//! each named slow effect's look-alikes (step 7 of the loop); last, the sensor's reading at
+//! rest at 0 V may name an offset ([`rest_reading`], GAP.md step 11).
 
 use super::catalogue::{self, EFFECTS, FAST, SLOW};
 use super::constants::{
@@ -1168,23 +1169,12 @@ fn diagnose_split(
             cur_mse = ms;
         }
     }
-    let mut cannot_tell = cannot_tell(&model, base, &named, data, &slow_x, u_range, &cur_mse);
-    // A pair left unnamed at one step whose shape a later step named (told apart then, by the
-    // held levels or because the rival no longer explained alike), or the same step beside an
-    // offset, is no longer a pair the records cannot tell.
-    // A drift that gave way stays reported unless a later step named it.
-    ambiguous.retain(|c| {
-        if c.neither_named {
-            !named.contains(&c.named) && !named.contains(&c.alternative)
-        } else {
-            !named.contains(&c.alternative)
-        }
-    });
-    cannot_tell.extend(ambiguous);
-    // The sensor's reading at rest at 0 V with no offset named: an offset that leaves no more
-    // is named (the reading at 0 V is the sensor's zero); where the table's own constant took
-    // the reading up and the offset leaves more, the two are reported as a pair the records
-    // cannot tell.
+    // The sensor's reading at rest at 0 V with no offset named: an offset fitted beside the
+    // others that takes it (on its side, half of it at least), lowers the score over all
+    // records and makes none worse is named (the reading at 0 V is the sensor's zero); where
+    // the table's own constant took the reading up and the offset does not pass, the two are
+    // reported as a pair the records cannot tell. (Before the look-alike pairs are settled
+    // below, so that a pair whose alternative this names is dropped.)
     if let Some(r) = rest_reading(
         &model,
         &named,
@@ -1197,7 +1187,21 @@ fn diagnose_split(
     ) {
         let fitted_v = r.with.offset.as_ref().map_or(0.0, |o| o.offset_v);
         let (rms_v, with_rms_v) = (rms_of(&cur_mse), rms_of(&r.mse));
-        let held = r.predicted_v * r.reading_v > 0.0
+        let n_all: f64 = data.iter().map(|d| d.len() as f64).sum();
+        let score = |ms: &[f64], k: f64| -> f64 {
+            data.iter()
+                .zip(ms)
+                .map(|(d, m)| d.len() as f64 * m.max(1e-14).ln())
+                .sum::<f64>()
+                + k * n_all.ln()
+        };
+        let takes_it = fitted_v * r.reading_v > 0.0
+            && fitted_v.abs() >= REST_ZERO_SHOWN_MIN * r.reading_v.abs();
+        let better = score(&r.mse, catalogue::param_count("offset") as f64) < score(&cur_mse, 0.0)
+            && r.mse.iter().zip(&cur_mse).all(|(a, b)| *a <= *b * 1.001);
+        let hysteresis = named.iter().any(|n| n == "hysteresis");
+        let held = hysteresis
+            && r.predicted_v * r.reading_v > 0.0
             && r.predicted_v.abs() >= REST_ZERO_SHOWN_MIN * r.reading_v.abs();
         let reading = format!(
             "the sensor reads {:.1} mV over the records' rest at 0 V input, where no other \
@@ -1211,14 +1215,14 @@ fn diagnose_split(
                 ""
             }
         );
-        if with_rms_v <= rms_v {
+        if takes_it && better {
             steps.push(Step {
                 params: params_json(&r.with, "offset"),
                 ..Step::new(
                     "offset".into(),
                     format!(
-                        "{reading}; an offset in the table's place ({:.1} mV) leaves {:.2} mV \
-                         against {:.2} mV",
+                        "{reading}; an offset fitted beside the others ({:.1} mV) leaves \
+                         {:.2} mV against {:.2} mV",
                         1e3 * fitted_v,
                         1e3 * with_rms_v,
                         1e3 * rms_v
@@ -1233,12 +1237,11 @@ fn diagnose_split(
             sims = r.sims;
             cur_mse = r.mse;
         } else if held
-            && named.iter().any(|n| n == "hysteresis")
-            && !cannot_tell
+            && !ambiguous
                 .iter()
                 .any(|k| k.named == "hysteresis" && k.alternative == "offset")
         {
-            cannot_tell.push(CannotTell {
+            ambiguous.push(CannotTell {
                 named: "hysteresis".into(),
                 alternative: "offset".into(),
                 neither_named: false,
@@ -1255,6 +1258,19 @@ fn diagnose_split(
             });
         }
     }
+    let mut cannot_tell = cannot_tell(&model, base, &named, data, &slow_x, u_range, &cur_mse);
+    // A pair left unnamed at one step whose shape a later step named (told apart then, by the
+    // held levels or because the rival no longer explained alike), or the same step beside an
+    // offset, is no longer a pair the records cannot tell.
+    // A drift that gave way stays reported unless a later step named it.
+    ambiguous.retain(|c| {
+        if c.neither_named {
+            !named.contains(&c.named) && !named.contains(&c.alternative)
+        } else {
+            !named.contains(&c.alternative)
+        }
+    });
+    cannot_tell.extend(ambiguous);
     let unexplained = locate(data, &sims, &noise);
     let final_rms_v = (cur_mse.iter().sum::<f64>() / cur_mse.len() as f64).sqrt();
     Ok(Diagnosis {

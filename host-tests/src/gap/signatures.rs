@@ -29,7 +29,8 @@
 use super::constants::{HELD_LOOP_MIN_DIR_SHARE, HELD_LOOP_MIN_HOLDS, HELD_LOOP_MIN_S};
 use super::{
     DRIFT_TAIL_MIN_NOISE, Data, HYST_LOOP_MIN_NOISE, LINE_RATIO_MIN, MAX_MODE_DAMPING,
-    OFFSET_SHOWN_MIN, REST_ZERO_INPUT_V, REST_ZERO_SHOWN_MIN, REST_ZERO_SIGMAS, catalogue,
+    OFFSET_SHOWN_MIN, REST_ZERO_INPUT_V, REST_ZERO_MIN_S, REST_ZERO_SHOWN_MIN, REST_ZERO_SIGMAS,
+    catalogue,
 };
 use crate::io::model_file::ModelFile;
 use model_core::params;
@@ -63,7 +64,8 @@ pub struct Signatures {
     /// Slope of that line (a scale error of the monitor), fraction.
     pub scale: f64,
     /// Over the records' first rest at 0 V input (from the first sample until the input first
-    /// moves, in records that start within [`REST_ZERO_INPUT_V`] of 0 V): the residual's mean,
+    /// leaves [`REST_ZERO_INPUT_V`] of 0 V, where that lasts [`REST_ZERO_MIN_S`]): the
+    /// residual's mean,
     /// the measured output's mean and the standard error of a mean there, volts; `None` where
     /// no record starts so.
     pub rest_zero_v: Option<(f64, f64, f64)>,
@@ -151,17 +153,15 @@ pub fn compute(data: &[Data], sims: &[Vec<f64>], noise: &[f64]) -> Signatures {
     let (mut rest_sum, mut rest_y, mut rest_n, mut rest_var) = (0.0, 0.0, 0usize, 0.0);
     for (k, (d, y)) in data.iter().zip(sims).enumerate() {
         let r: Vec<f64> = d.y_v.iter().zip(y).map(|(a, b)| a - b).collect();
-        if let Some(&u0) = d.u_v.first()
-            && u0.abs() <= REST_ZERO_INPUT_V
-        {
-            // Until the input first leaves its hold band (the output cannot move before it).
-            let band = d.hold_band_v.max(1e-9);
-            let end = d
-                .u_v
-                .iter()
-                .position(|u| (u - u0).abs() > band)
-                .unwrap_or(d.len())
-                .min(r.len());
+        // Until the input first leaves 0 V (the output cannot move before it), if that is
+        // long enough to be a rest.
+        let end = d
+            .u_v
+            .iter()
+            .position(|u| u.abs() > REST_ZERO_INPUT_V)
+            .unwrap_or(d.len())
+            .min(r.len());
+        if end as f64 * d.period_s() >= REST_ZERO_MIN_S {
             rest_sum += r[..end].iter().sum::<f64>();
             rest_y += d.y_v[..end].iter().sum::<f64>();
             rest_n += end;
@@ -518,11 +518,12 @@ mod tests {
     }
 
     /// The rest at 0 V shows an offset where the sensor reads it there and the model without
-    /// it leaves it there, and not where either sits at zero: a record that starts at rest at
-    /// 0 V for 100 samples, then steps to 5 V, measured with a 20 mV offset (or without) and
-    /// a model that predicts either nothing or the offset at rest. The means are exact (no
-    /// noise, a 1 mV noise level for the standard error), so the cut between 0.5 and 1.0 of
-    /// the fitted 20 mV cannot be missed by rounding.
+    /// it leaves half of it or more there, and not where either sits at zero or below half:
+    /// a record that starts at rest at 0 V for 100 samples, then steps to 5 V, measured with
+    /// a 20 mV offset (or without) and a model that predicts nothing, 6 mV (0.7 of it left),
+    /// 12 mV (0.4 left) or all of it at rest; and a noise level whose standard error puts the
+    /// reading within 3 of them. The means are exact (no noise in the records), so the cuts
+    /// at 0.5 and at 3 standard errors cannot be missed by rounding.
     #[test]
     fn the_rest_at_zero_volts_shows_a_sensor_offset_only() {
         let n = 400;
@@ -558,6 +559,27 @@ mod tests {
         assert!(!sigs(0.02, &at_rest).shows_offset_at_rest(&model));
         // The other sign of zero.
         assert!(!sigs(-0.02, &plain).shows_offset_at_rest(&model));
+        // The model predicts part of the reading: 0.7 of it left shows, 0.4 does not.
+        let part = |v: f64| -> Vec<f64> {
+            u.iter()
+                .enumerate()
+                .map(|(i, x)| x + if i < 100 { v } else { 0.0 })
+                .collect()
+        };
+        assert!(sigs(0.02, &part(0.006)).shows_offset_at_rest(&model));
+        assert!(!sigs(0.02, &part(0.012)).shows_offset_at_rest(&model));
+        // A noise of 0.1 V: the mean's standard error is 10 mV, the reading within 3 of it.
+        let noisy = compute(&[record(0.02)], std::slice::from_ref(&plain), &[0.1]);
+        assert!((noisy.rest_zero_v.unwrap().2 - 0.01).abs() < 1e-12);
+        assert!(!noisy.shows_offset_at_rest(&model));
+        // A rest shorter than REST_ZERO_MIN_S (1 ms at 1 kHz) is none.
+        let brief: Vec<f64> = (0..n).map(|i| if i < 1 { 0.0 } else { 5.0 }).collect();
+        let d = Data::from_record(
+            "brief.csv",
+            Record::new(t.clone(), brief.clone(), Some(brief.clone()), None).unwrap(),
+        )
+        .unwrap();
+        assert!(compute(&[d], &[brief], &[1e-3]).rest_zero_v.is_none());
         // A record that does not start at 0 V has no rest at 0 V.
         let lifted: Vec<f64> = u.iter().map(|x| x + 1.0).collect();
         let d = Data::from_record(
