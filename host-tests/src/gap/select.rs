@@ -5,7 +5,7 @@
 //! every named effect that does not earn its place ([`super::constants::PRUNE_RATIO`]), the
 //! slow effects are refitted once more with every named effect in place, and the swaps try
 //! each named slow effect's look-alikes (step 7 of the loop); last, the sensor's reading at
-//! rest at 0 V may name an offset ([`rest_reading`], GAP.md step 11).
+//! rest at 0 V may name an offset (`rest_reading`, GAP.md step 11).
 
 use super::catalogue::{self, EFFECTS, FAST, SLOW};
 use super::constants::{
