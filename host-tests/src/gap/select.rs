@@ -16,7 +16,7 @@ use super::constants::{
 use super::data::{Data, min_max, mse, noise_floor, sim, simulate_all};
 use super::everett::CentreLine;
 use super::fast_fit::fit_fast;
-use super::signatures;
+use super::signatures::{self, shows_share};
 use super::slow_fit::{SlowRegressors, fit_slow, slow_regressors, solve_rows};
 use super::start;
 use super::unexplained::{Unexplained, locate};
@@ -212,6 +212,28 @@ pub struct CannotTell {
     pub neither_named: bool,
     /// Why, and what record would tell them apart.
     pub why: String,
+}
+
+/// The BIC score of the named `set` over all records at residual powers `ms`: each record's
+/// Gaussian log-likelihood term plus the set's parameters times the log of all samples
+/// (lower is better; the swaps and the reading at rest compare sets by it).
+fn set_score(data: &[Data], ms: &[f64], set: &[String]) -> f64 {
+    let n_all: f64 = data.iter().map(|d| d.len() as f64).sum();
+    data.iter()
+        .zip(ms)
+        .map(|(d, m)| d.len() as f64 * m.max(1e-14).ln())
+        .sum::<f64>()
+        + set
+            .iter()
+            .map(|e| catalogue::param_count(e) as f64)
+            .sum::<f64>()
+            * n_all.ln()
+}
+
+/// No record's residual power grows (beyond 0.1 %, rounding): the score is dominated by the
+/// longest record, and a change that trades a short fast record for it is no explanation.
+fn no_record_worse(ms: &[f64], cur_mse: &[f64]) -> bool {
+    ms.iter().zip(cur_mse).all(|(a, b)| *a <= *b * 1.001)
 }
 
 /// An offset fitted in the place of the table's constant at rest at 0 V
@@ -1076,18 +1098,7 @@ fn diagnose_split(
     // residual power grows. At the floor too: a form that fits as well with fewer parameters
     // (an offset and a scale for a polynomial gain and an offset) is the one to name.
     {
-        let n_all: f64 = data.iter().map(|d| d.len() as f64).sum();
-        let score = |ms: &[f64], set: &[String]| -> f64 {
-            data.iter()
-                .zip(ms)
-                .map(|(d, m)| d.len() as f64 * m.max(1e-14).ln())
-                .sum::<f64>()
-                + set
-                    .iter()
-                    .map(|e| catalogue::param_count(e) as f64)
-                    .sum::<f64>()
-                    * n_all.ln()
-        };
+        let score = |ms: &[f64], set: &[String]| set_score(data, ms, set);
         let named_slow: Vec<String> = named
             .iter()
             .filter(|e| SLOW.contains(&e.as_str()))
@@ -1139,7 +1150,7 @@ fn diagnose_split(
                 // No record may get worse: the score is dominated by the longest record, and
                 // a swap that trades a short fast record for it (an offset for the non-linear
                 // gain of the full thesis stage) is no explanation.
-                let harmless = ms.iter().zip(&cur_mse).all(|(a, b)| *a <= *b * 1.001);
+                let harmless = no_record_worse(&ms, &cur_mse);
                 let shown =
                     cur_sigs.supports(f, &m) && (f != "offset" || cur_sigs.shows_offset(&m));
                 (harmless && shown && sc < cur_score).then_some((
@@ -1187,22 +1198,12 @@ fn diagnose_split(
     ) {
         let fitted_v = r.with.offset.as_ref().map_or(0.0, |o| o.offset_v);
         let (rms_v, with_rms_v) = (rms_of(&cur_mse), rms_of(&r.mse));
-        let n_all: f64 = data.iter().map(|d| d.len() as f64).sum();
-        let score = |ms: &[f64], k: f64| -> f64 {
-            data.iter()
-                .zip(ms)
-                .map(|(d, m)| d.len() as f64 * m.max(1e-14).ln())
-                .sum::<f64>()
-                + k * n_all.ln()
-        };
-        let takes_it = fitted_v * r.reading_v > 0.0
-            && fitted_v.abs() >= REST_ZERO_SHOWN_MIN * r.reading_v.abs();
-        let better = score(&r.mse, catalogue::param_count("offset") as f64) < score(&cur_mse, 0.0)
-            && r.mse.iter().zip(&cur_mse).all(|(a, b)| *a <= *b * 1.001);
-        let hysteresis = named.iter().any(|n| n == "hysteresis");
-        let held = hysteresis
-            && r.predicted_v * r.reading_v > 0.0
-            && r.predicted_v.abs() >= REST_ZERO_SHOWN_MIN * r.reading_v.abs();
+        let with_offset: Vec<String> = named.iter().cloned().chain(["offset".into()]).collect();
+        let takes_it = shows_share(fitted_v, r.reading_v, REST_ZERO_SHOWN_MIN);
+        let better = set_score(data, &r.mse, &with_offset) < set_score(data, &cur_mse, &named)
+            && no_record_worse(&r.mse, &cur_mse);
+        let held = named.iter().any(|n| n == "hysteresis")
+            && shows_share(r.predicted_v, r.reading_v, REST_ZERO_SHOWN_MIN);
         let reading = format!(
             "the sensor reads {:.1} mV over the records' rest at 0 V input, where no other \
              effect moves it, and the model without an offset predicts {:.1} mV there{}",

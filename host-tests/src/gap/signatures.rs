@@ -258,6 +258,12 @@ pub fn compute(data: &[Data], sims: &[Vec<f64>], noise: &[f64]) -> Signatures {
     s
 }
 
+/// Does `level` show at least `share` of `of`, on its side of zero? (The offset's tests: a
+/// residual's level against a fitted constant, a fitted constant against a reading.)
+pub(super) fn shows_share(level: f64, of: f64, share: f64) -> bool {
+    level * of > 0.0 && level.abs() >= share * of.abs()
+}
+
 fn mean(v: &[f64]) -> f64 {
     v.iter().sum::<f64>() / v.len().max(1) as f64
 }
@@ -412,9 +418,7 @@ impl Signatures {
     /// other effects.
     pub fn shows_offset(&self, model: &ModelFile) -> bool {
         let fitted_v = model.offset.as_ref().map_or(0.0, |o| o.offset_v);
-        let line = fitted_v * self.level_v > 0.0
-            && self.level_v.abs() >= OFFSET_SHOWN_MIN * fitted_v.abs();
-        line || self.shows_offset_at_rest(model)
+        shows_share(self.level_v, fitted_v, OFFSET_SHOWN_MIN) || self.shows_offset_at_rest(model)
     }
 
     /// Does this residual, of a model without `model`'s fitted offset, show that offset over
@@ -427,8 +431,7 @@ impl Signatures {
     pub fn shows_offset_at_rest(&self, model: &ModelFile) -> bool {
         let fitted_v = model.offset.as_ref().map_or(0.0, |o| o.offset_v);
         let shows = |level_v: f64, se_v: f64| {
-            fitted_v * level_v > 0.0
-                && level_v.abs() >= REST_ZERO_SHOWN_MIN * fitted_v.abs()
+            shows_share(level_v, fitted_v, REST_ZERO_SHOWN_MIN)
                 && level_v.abs() >= REST_ZERO_SIGMAS * se_v
         };
         self.rest_zero_v
