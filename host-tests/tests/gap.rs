@@ -1133,6 +1133,7 @@ fn linear_with_drift(seed: u64, gains: [f64; 3], taus_s: [f64; 3]) -> ModelFile 
         taus_s,
         poly: [1.0, 0.0, 0.0, 0.0],
         poly_range_v: [0.0, 10.0],
+        unsettled_v: None,
     });
     m
 }

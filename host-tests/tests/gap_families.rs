@@ -447,20 +447,21 @@ fn run_suite() -> Option<Tally> {
 
 /// What the workflow holds on the drawn cases today, as a guard against regressions (the
 /// test command runs it and prints the confusion table): no name on a clean record, and at
-/// least 75 % exact named sets with at most 10 % false names, in release with the default
-/// 100 cases (`GAP_CASES` unset). Measured on 473fd59 (ci profile, 2 cores, 216 s): 79.0 %
-/// exact, 9 false names of 114 (7.9 %), 0 of 15 clean cases named, the same 21 failing cases
-/// since session 16; the margins are four exact cases and two or three false names of the
-/// 100, so a change that moves the workflow's decisions on a handful of cases shows here. The
-/// issue's own figures are the ignored test below.
+/// least 78 % exact named sets with at most 8 % false names, in release with the default
+/// 100 cases (`GAP_CASES` unset). Measured in session 23 (ci profile, 2 cores, 258 s): 82.0 %
+/// exact, 7 false names of 113 (6.2 %), 0 of 15 clean cases named (session 22: 79.0 % and
+/// 10 of 116; step 12 read the three drift records' false offsets, 1073, 1087 and 1096, as
+/// the drift's start); the margins are four exact cases and two false names of the 100, so a
+/// change that moves the workflow's decisions on a handful of cases shows here. The issue's
+/// own figures are the ignored test below.
 #[test]
 fn randomised_families_hold_their_measured_rates() {
     let full_run = std::env::var("GAP_CASES").is_err();
     suite_meets(
-        75.0,
-        10.0,
+        78.0,
+        8.0,
         full_run,
-        "the measured 79 % and 7.9 % with their margins",
+        "the measured 82 % and 6.2 % with their margins",
     );
 }
 
@@ -488,7 +489,7 @@ fn suite_meets(exact_pct: f64, false_pct: f64, rates: bool, what: &str) {
 }
 
 /// Issue #12's requirements on 100 drawn cases: >= 95 % exact named sets, <= 1 % false names
-/// (of the names given), no name on a clean record. Not met: 79.0 % exact and 7.9 % false
+/// (of the names given), no name on a clean record. Not met: 82.0 % exact and 6.2 % false
 /// names (see the test above and `host-tests/GAP.md`); most failures are a loop of another
 /// form (Bouc-Wen, Duhem) on a sine or a chirp beside a static shape the records cannot tell
 /// from the table's misfit.
@@ -582,4 +583,75 @@ fn truth_forms_follow_their_laws() {
             .fold(0.0f64, f64::max);
         assert!((dev / m.amp_v.abs() - 1.0).abs() < 1e-3, "{m:?}");
     }
+}
+
+/// Step 12 on creeps it was not shaped on: log and power creeps drawn anew (seeds 3001-3006,
+/// not the suite's; the step was shaped on the suite's 1073, 1087 and 1096), counted from the
+/// first input as the families count them, on random levels (whose first level is not 0 V).
+/// Alone, the constant they leave against the model's settled lags is the drift's start, or
+/// too small to name where the first level is low: `drift` named and no `offset`. Beside a
+/// true sensor offset of -40..-80 mV (the sign of the creep taken back, so that the two add),
+/// the offset is beyond the step's tenth of the creep and stays named. (First drawn with
+/// offsets of the other sign, seeds 3005 and 3006 named `drift` alone at 1.11x and 1.14x:
+/// their +42.5 and +64.6 mV cancelled most of the creep's constant at first inputs of 2.0 and
+/// 2.6 V, and the records hold no level to name, a limit of any fit on such records.)
+/// Measured in session 23: 3001 and 3003 would have named an `offset` without step 12 (the
+/// pair is reported); 3002 and 3004 (first levels 1.77 and 0.59 V) name none either way;
+/// the residuals, 1.44-3.14x, are the three lags' misfit of these creeps, not asserted here.
+#[test]
+fn creep_counted_from_the_first_input_is_not_a_sensor_offset() {
+    if cfg!(debug_assertions) {
+        return;
+    }
+    let base = ModelFile::built_in("thesis-linear").unwrap();
+    let mut lines = Vec::new();
+    for seed in 3001..=3006u64 {
+        let mut rng = StdRng::seed_from_u64(seed);
+        let protocol = draw_protocol(Family::RandomLevels, &mut rng);
+        let creep = Creep::draw(&mut rng);
+        let with_offset = seed > 3004;
+        let offset_v = with_offset.then(|| -rng.gen_range(0.04..0.08));
+        let mut effects = vec!["drift"];
+        if with_offset {
+            effects.push("offset");
+        }
+        let case = Case {
+            seed,
+            protocol,
+            effects,
+            hysteresis: None,
+            creep: Some(creep),
+            static_map: None,
+            sensor_gain: None,
+            offset_v,
+            delay_s: None,
+            slew_v_per_s: None,
+            mode: None,
+        };
+        let data = case.records();
+        let d = diagnose(&base, &data, &Options::default()).expect("diagnosis");
+        let mut named = d.named.clone();
+        named.sort();
+        let ratio = d.final_rms_v / d.noise_floor_v;
+        let pair = d
+            .cannot_tell
+            .iter()
+            .any(|c| c.named == "drift" && c.alternative == "offset");
+        lines.push(format!(
+            "seed {seed} ({}; first input {:.2} V): named {named:?}, {ratio:.2}x, pair reported {pair}",
+            case.describe(),
+            data[0].u_v[0]
+        ));
+        let ok = if with_offset {
+            named == ["drift", "offset"]
+        } else {
+            named == ["drift"]
+        };
+        if !ok {
+            lines.push(format!("  FAIL seed {seed}\n{}", d.table()));
+        }
+    }
+    let report = lines.join("\n");
+    println!("{report}");
+    assert!(!report.contains("FAIL"), "{report}");
 }

@@ -179,6 +179,9 @@ pub fn params_of(m: &ModelFile, effect: &str) -> Vec<(String, f64)> {
                 }
                 v.push(("k_held_above_v".into(), d.poly_range_v[1]));
             }
+            if let Some(c) = d.unsettled_v {
+                v.push(("unsettled_v".into(), c));
+            }
             v
         }),
         "hysteresis" => match (&m.hysteresis, &m.hysteresis_play) {
@@ -315,6 +318,7 @@ pub fn with_slow(m: &ModelFile, p: &SlowParams, u_range: (f64, f64)) -> Option<M
             taus_s: taus,
             poly: p.drift_poly.map_or([1.0, 0.0, 0.0, 0.0], |k| k.0),
             poly_range_v: [u_range.0, p.drift_poly.map_or(u_range.1, |k| k.1)],
+            unsettled_v: None,
         });
     }
     if let Some(h) = &p.hysteresis {

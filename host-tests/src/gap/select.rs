@@ -5,13 +5,16 @@
 //! every named effect that does not earn its place ([`super::constants::PRUNE_RATIO`]), the
 //! slow effects are refitted once more with every named effect in place, and the swaps try
 //! each named slow effect's look-alikes (step 7 of the loop); last, the sensor's reading at
-//! rest at 0 V may name an offset (`rest_reading`, GAP.md step 11).
+//! rest at 0 V may name an offset (`rest_reading`, GAP.md step 11), and an offset that is the
+//! settled creep at the records' first input taken back is read as the drift's start
+//! (`creep_start`, GAP.md step 12).
 
 use super::catalogue::{self, EFFECTS, FAST, SLOW};
 use super::constants::{
-    CANDIDATE_ROUNDS, CANNOT_TELL_RATIO, HOLD_MIN_S, MAX_STEPS, MIN_EXPLAINED, PAIR_FLOOR_RATIO,
-    PRUNE_KEEP_EXCESS_VAR, PRUNE_PER_PARAM, PRUNE_RATIO, REST_ZERO_SHOWN_MIN, REST_ZERO_SIGMAS,
-    STATIC_TELL_RATIO, STOP_FLOOR_RATIO, STRUCTURE_ROUNDS,
+    CANDIDATE_ROUNDS, CANNOT_TELL_RATIO, CREEP_START_MIN_FLOORS, CREEP_START_SHARE, HOLD_MIN_S,
+    MAX_STEPS, MIN_EXPLAINED, PAIR_FLOOR_RATIO, PRUNE_KEEP_EXCESS_VAR, PRUNE_PER_PARAM,
+    PRUNE_RATIO, REST_ZERO_SHOWN_MIN, REST_ZERO_SIGMAS, STATIC_TELL_RATIO, STOP_FLOOR_RATIO,
+    STRUCTURE_ROUNDS,
 };
 use super::data::{Data, min_max, mse, noise_floor, sim, simulate_all};
 use super::everett::CentreLine;
@@ -283,6 +286,53 @@ fn rest_reading(
         mse,
         reading_v: y_v,
         predicted_v: y_v - level_v,
+    })
+}
+
+/// A named offset that is the model's settled creep at the records' first input taken back
+/// ([`creep_start`]): the offset, the records' first input (the first record's) and the
+/// settled creep there, volts.
+struct CreepStart {
+    offset_v: f64,
+    first_input_v: f64,
+    creep_v: f64,
+}
+
+/// Step 12 (GAP.md): with `drift` and `offset` named, is the offset the model's settled creep
+/// at every record's first input with its sign turned, within [`CREEP_START_SHARE`] of it
+/// (and that creep at least [`CREEP_START_MIN_FLOORS`] noise floors)? The model's drift starts
+/// settled at the first input (a stage at rest there for ever); a stage whose creep counts
+/// from the first input (its creep had not settled there, or a creep with no end, such as a
+/// logarithmic one, measured from the record's start) reads exactly that much less at every
+/// sample, which an offset takes up. Records that start at different inputs have different
+/// settled creeps, and one offset cannot take back all of them.
+fn creep_start(
+    model: &ModelFile,
+    named: &[String],
+    data: &[Data],
+    noise: &[f64],
+) -> Option<CreepStart> {
+    if !["drift", "offset"]
+        .iter()
+        .all(|e| named.iter().any(|n| n == e))
+    {
+        return None;
+    }
+    let offset_v = model.offset.as_ref()?.offset_v;
+    let mut creeps = Vec::with_capacity(data.len());
+    for (d, floor) in data.iter().zip(noise) {
+        let creep_v = model.settled_creep_reading_v(*d.u_v.first()?).ok()?;
+        let taken_back = (offset_v + creep_v).abs() <= CREEP_START_SHARE * creep_v.abs()
+            && creep_v.abs() >= CREEP_START_MIN_FLOORS * floor;
+        if !taken_back {
+            return None;
+        }
+        creeps.push(creep_v);
+    }
+    Some(CreepStart {
+        offset_v,
+        first_input_v: data.first()?.u_v[0],
+        creep_v: *creeps.first()?,
     })
 }
 
@@ -1259,6 +1309,47 @@ fn diagnose_split(
             });
         }
     }
+    // Step 12: an offset that is the settled creep at the records' first input taken back is
+    // the drift's start (the creep counts from the first input), not the sensor's zero: the
+    // constant moves into `[drift] unsettled_v` (the same readings), the offset is no longer
+    // named, and the pair is reported as one the records cannot tell.
+    if let Some(c) = creep_start(&model, &named, data, &noise)
+        && let Some(drift) = model.drift.as_mut()
+    {
+        drift.unsettled_v = Some(c.offset_v);
+        model.offset = None;
+        named.retain(|n| n != "offset");
+        let why = format!(
+            "the offset fitted at {:.1} mV is the model's settled creep at the records' first \
+             input ({:.1} mV at {:.2} V) taken back, within {:.0} %: a stage whose creep counts \
+             from that input (not settled there, as the model's drift starts) reads so, as \
+             would a sensor offset of that size; kept as the drift's start ([drift] \
+             unsettled_v); a rest at 0 V before the records, or records that start at other \
+             inputs, tell them apart",
+            1e3 * c.offset_v,
+            1e3 * c.creep_v,
+            c.first_input_v,
+            100.0 * CREEP_START_SHARE
+        );
+        steps.push(Step {
+            removed: true,
+            ..Step::new(
+                "offset".into(),
+                why.clone(),
+                &cur_mse,
+                &cur_mse,
+                sims.clone(),
+            )
+        });
+        ambiguous.push(CannotTell {
+            named: "drift".into(),
+            alternative: "offset".into(),
+            neither_named: false,
+            rms_v: rms_of(&cur_mse),
+            alternative_rms_v: rms_of(&cur_mse),
+            why,
+        });
+    }
     let mut cannot_tell = cannot_tell(&model, base, &named, data, &slow_x, u_range, &cur_mse);
     // A pair left unnamed at one step whose shape a later step named (told apart then, by the
     // held levels or because the rival no longer explained alike), or the same step beside an
@@ -1671,6 +1762,69 @@ fn candidates(
 mod tests {
     use super::*;
     use crate::io::csv::Record;
+
+    /// Step 12 reads an offset as the drift's start only where it is the settled creep at
+    /// every record's first input taken back (within a tenth), that creep is clearly above the
+    /// noise, and both effects are named.
+    #[test]
+    fn an_offset_that_takes_back_the_settled_creep_is_the_drifts_start() {
+        let mut model = ModelFile::built_in("thesis-full").unwrap();
+        let record = |u0: f64| {
+            let t: Vec<f64> = (0..200).map(|i| i as f64 * 1e-3).collect();
+            let u: Vec<f64> = (0..t.len())
+                .map(|i| if i < 100 { u0 } else { u0 + 1.0 })
+                .collect();
+            Data::from_record(
+                "levels.csv",
+                Record::new(t, u.clone(), Some(u), None).unwrap(),
+            )
+            .unwrap()
+        };
+        let creep_v = model.settled_creep_reading_v(6.0).unwrap();
+        // The thesis' drift: about 0.16 of the static output, settled (its three lags).
+        assert!(creep_v > 0.3, "{creep_v}");
+        let named: Vec<String> = ["drift", "offset"].iter().map(|s| s.to_string()).collect();
+        let floor = [1e-3];
+        let at = |model: &ModelFile, named: &[String], data: &[Data]| {
+            creep_start(model, named, data, &vec![1e-3; data.len()]).map(|c| c.offset_v)
+        };
+        for (share, taken) in [
+            (1.0, true),
+            (0.92, true),
+            (1.08, true),
+            (0.85, false),
+            (1.2, false),
+        ] {
+            model.offset = Some(crate::io::model_file::OffsetSection {
+                offset_v: -share * creep_v,
+            });
+            assert_eq!(
+                at(&model, &named, &[record(6.0)]).is_some(),
+                taken,
+                "offset at {share} of the creep"
+            );
+        }
+        model.offset = Some(crate::io::model_file::OffsetSection { offset_v: -creep_v });
+        // The other sign: a sensor offset, not a creep taken back.
+        let mut other = model.clone();
+        other.offset = Some(crate::io::model_file::OffsetSection { offset_v: creep_v });
+        assert!(at(&other, &named, &[record(6.0)]).is_none());
+        // Records starting elsewhere have another settled creep: one offset cannot be both.
+        assert!(at(&model, &named, &[record(6.0), record(3.0)]).is_none());
+        assert!(at(&model, &named, &[record(6.0), record(6.0)]).is_some());
+        // No drift named, or no offset named: nothing to read.
+        assert!(at(&model, &named[..1], &[record(6.0)]).is_none());
+        assert!(at(&model, &named[1..], &[record(6.0)]).is_none());
+        // A record that starts at 0 V has no settled creep to take back.
+        let small = ModelFile::built_in("thesis-full").unwrap();
+        let near_zero = small.settled_creep_reading_v(0.01).unwrap();
+        let mut m0 = small.clone();
+        m0.offset = Some(crate::io::model_file::OffsetSection {
+            offset_v: -near_zero,
+        });
+        assert!(near_zero.abs() < 5.0 * floor[0], "{near_zero}");
+        assert!(at(&m0, &named, &[record(0.01)]).is_none());
+    }
 
     /// Two fits explain alike only where every record agrees: a record in which one leaves
     /// clearly less (beyond `STATIC_TELL_RATIO`, a noise variance allowed) tells them apart

@@ -56,6 +56,7 @@ pub fn drift_into(model: &mut ModelFile, rec: &Record, source: &str) -> anyhow::
         taus_s: d.taus_s,
         poly: d.poly,
         poly_range_v: [d.poly_range_v.0, d.poly_range_v.1],
+        unsettled_v: None,
     });
     model.name = format!("{} + drift identified from {source}", model.name);
     model.build_stage()?;
