@@ -160,7 +160,9 @@ pub const CREEP_START_SHARE: f64 = 0.1;
 
 /// The least settled creep at the records' first input, in noise floors, for step 12 to
 /// compare an offset with it (our assumption: a record that starts at or near 0 V has no
-/// settled creep to take back, and there an offset is the sensor's).
+/// settled creep to take back, and there an offset is the sensor's; at 5 floors the step's
+/// tenth of the creep is half a floor, so an offset read as the creep's is told from a
+/// smaller one to within the noise of a single sample).
 pub const CREEP_START_MIN_FLOORS: f64 = 5.0;
 
 /// Shortest run of constant input that counts as a hold, seconds (our assumption: long enough

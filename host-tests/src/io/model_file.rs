@@ -183,7 +183,8 @@ pub struct DriftSection {
     /// added to every reading (the model-gap workflow's step 12, GAP.md): the model's creep
     /// starts settled at the first input, while a stage whose creep counts from that input
     /// reads the settled creep less there. Absent: settled. It holds for records that start
-    /// at the same input (the settled creep grows with the input).
+    /// at the same input (the settled creep grows with the input), and a refit of the drift
+    /// drops it (its gains then change the settled creep).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub unsettled_v: Option<f64>,
 }
@@ -663,8 +664,9 @@ impl ModelFile {
         c.amplifier
             .validate()
             .map_err(|e| anyhow::anyhow!("[amplifier] / [slew-rate-limit] / [saturation]: {e}"))?;
-        model_core::sensor::Sensor::new(&c.sensor)
-            .map_err(|e| anyhow::anyhow!("[converters] / [sensor-gain] / [offset]: {e}"))?;
+        model_core::sensor::Sensor::new(&c.sensor).map_err(|e| {
+            anyhow::anyhow!("[converters] / [sensor-gain] / [offset] / [drift] unsettled_v: {e}")
+        })?;
         Ok(())
     }
 
