@@ -1187,9 +1187,37 @@ fn diagnose_split(
         // it would join (a loop for hysteresis, a tail for drift where the records hold), and
         // an offset must be a level that residual shows (`Signatures::shows_offset`).
         let cur_sigs = signatures::compute(data, &sims, &noise);
+        // A static shape with fewer parameters that leaves alike in every record
+        // (`alike_in_every_record`) in a named static shape's place is the one the records
+        // support (a scale for a curvature whose linear term does the scale's work beside a
+        // loop of another form): swapped in whatever the score, if it is the only such shape
+        // for that place (two alike, a scale and an offset, and the records cannot choose).
+        let occam_alike = |e: &str, f: &str, ms: &[f64]| {
+            STATIC_SHAPES.contains(&e)
+                && STATIC_SHAPES.contains(&f)
+                && catalogue::param_count(f) < catalogue::param_count(e)
+                && alike_in_every_record(ms, &cur_mse, &var)
+        };
+        let trials: Vec<Option<Fitted>> = trials;
+        // A swapped-in effect must pass the steps' gate on the residual of the model it would
+        // join, and an offset must be a level that residual shows.
+        let shown = |f: &str, m: &ModelFile| {
+            cur_sigs.supports(f, m) && (f != "offset" || cur_sigs.shows_offset(m))
+        };
+        let alike_count = |e: &str| {
+            swaps
+                .iter()
+                .zip(&trials)
+                .filter(|((e2, f), t)| {
+                    e2 == e
+                        && t.as_ref()
+                            .is_some_and(|(m, _, ms)| occam_alike(e, f, ms) && shown(f, m))
+                })
+                .count()
+        };
         let best = swaps
             .iter()
-            .zip(trials)
+            .zip(trials.iter().cloned())
             .filter_map(|((e, f), t)| {
                 let (m, s, ms) = t?;
                 let set: Vec<String> = named
@@ -1201,9 +1229,9 @@ fn diagnose_split(
                 // a swap that trades a short fast record for it (an offset for the non-linear
                 // gain of the full thesis stage) is no explanation.
                 let harmless = no_record_worse(&ms, &cur_mse);
-                let shown =
-                    cur_sigs.supports(f, &m) && (f != "offset" || cur_sigs.shows_offset(&m));
-                (harmless && shown && sc < cur_score).then_some((
+                let shown = shown(f, &m);
+                let occam = occam_alike(e, f, &ms) && alike_count(e) == 1;
+                (shown && ((harmless && sc < cur_score) || occam)).then_some((
                     e.clone(),
                     f.clone(),
                     set,
@@ -1216,10 +1244,22 @@ fn diagnose_split(
             .min_by(|a, b| a.6.total_cmp(&b.6));
         if let Some((e, f, set, m, s, ms, sc)) = best {
             let params = params_json(&m, &f);
-            let evidence = format!(
-                "swapped in for {e}, which these records cannot tell from it (score {:.0} lower)",
-                cur_score - sc
-            );
+            let evidence = if sc < cur_score {
+                format!(
+                    "swapped in for {e}, which these records cannot tell from it (score {:.0} lower)",
+                    cur_score - sc
+                )
+            } else {
+                format!(
+                    "swapped in for {e}, which these records cannot tell from it: {} parameter(s) \
+                     against {}, alike in every record ({:.2} mV against {:.2} mV), and no \
+                     other shape with fewer alike",
+                    catalogue::param_count(&f),
+                    catalogue::param_count(&e),
+                    1e3 * rms_of(&ms),
+                    1e3 * rms_of(&cur_mse)
+                )
+            };
             steps.push(Step {
                 params,
                 ..Step::new(f.clone(), evidence, &cur_mse, &ms, s.clone())
