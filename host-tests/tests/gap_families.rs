@@ -447,7 +447,7 @@ fn run_suite() -> Option<Tally> {
 
 /// What the workflow holds on the drawn cases today, as a guard against regressions (the
 /// test command runs it and prints the confusion table): no name on a clean record, and at
-/// least 79 % exact named sets with at most 7 % false names, in release with the default
+/// least 79 % exact named sets with at most 7.5 % false names, in release with the default
 /// 100 cases (`GAP_CASES` unset). Measured in session 23 (ci profile, 2 cores, 260 s): 83.0 %
 /// exact, 6 false names of 113 (5.3 %), 0 of 15 clean cases named (session 22: 79.0 % and
 /// 10 of 116; step 12 read the three drift records' false offsets, 1073, 1087 and 1096, as
@@ -460,7 +460,7 @@ fn randomised_families_hold_their_measured_rates() {
     let full_run = std::env::var("GAP_CASES").is_err();
     suite_meets(
         79.0,
-        7.0,
+        7.5,
         full_run,
         "the measured 83 % and 5.3 % with their margins",
     );

@@ -193,3 +193,11 @@ pub const CANNOT_TELL_RATIO: f64 = 1.25;
 /// floor, plus one noise variance, either way: `select::explain_alike`): one record that
 /// tells the two apart does, however alike the pool.
 pub const STATIC_TELL_RATIO: f64 = 1.5;
+
+/// How close, in every record, a static shape with fewer parameters must leave the residual
+/// (above the floor, plus one noise variance, either way) to be swapped in for a named static
+/// shape whatever the score (the swaps, GAP.md step 8). Our assumption, measured: families
+/// case 1074 (a Bouc-Wen loop and a 0.6 % scale on a chirp, `nonlinear-gain` named) left 1.06
+/// times as much with the scale; a tenth is far tighter than [`STATIC_TELL_RATIO`], so a true
+/// curvature that carries more than a tenth of what is left is not traded for a scale.
+pub const OCCAM_SWAP_RATIO: f64 = 1.1;
