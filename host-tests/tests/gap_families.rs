@@ -655,7 +655,8 @@ fn creep_counted_from_the_first_input_is_not_a_sensor_offset() {
                 .and_then(|x| x.unsettled_v)
                 .is_some_and(|c| {
                     let creep = d.model.settled_creep_reading_v(data[0].u_v[0]).unwrap();
-                    d.model.offset.is_none() && (c + creep).abs() <= 0.1 * creep.abs()
+                    d.model.offset.is_none()
+                        && (c + creep).abs() <= gap::CREEP_START_SHARE * creep.abs()
                 });
         fired += pair as usize;
         let ok = start_ok

@@ -1902,7 +1902,10 @@ mod tests {
         m0.offset = Some(crate::io::model_file::OffsetSection {
             offset_v: -near_zero,
         });
-        assert!(near_zero.abs() < 5.0 * 1e-3, "{near_zero}");
+        assert!(
+            near_zero.abs() < CREEP_START_MIN_FLOORS * 1e-3,
+            "{near_zero}"
+        );
         assert!(at(&m0, &named, &[record(0.01)]).is_none());
     }
 

@@ -686,7 +686,8 @@ impl ModelFile {
         }
         let mut without = self.clone();
         without.drift = None;
-        let gain = self.converters.sensor_gain * self.sensor_gain.as_ref().map_or(1.0, |g| g.gain);
+        // The sensor's scale as the stage applies it ([converters] times [sensor-gain]).
+        let gain = self.stage_config()?.sensor.gain;
         let u = u_v as f32;
         Ok(gain
             * (self.build_stage()?.static_output(u) - without.build_stage()?.static_output(u))
