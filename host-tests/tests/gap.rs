@@ -990,6 +990,14 @@ fn single_sine_outcomes(seeds: &[u64]) -> Vec<(u64, Vec<String>, f64)> {
             "seed {seed}: after the first cycle {:.2}x the floor",
             tail_rms / d.noise_floor_v
         );
+        if std::env::var("GAP_DEBUG").is_ok() {
+            for (i, t) in d.tried.iter().enumerate() {
+                println!("seed {seed}: tried at step {}: {t:?}", i + 1);
+            }
+            for c in &d.cannot_tell {
+                println!("seed {seed}: cannot tell {c:?}");
+            }
+        }
         results.push((seed, d.named.clone(), d.final_rms_v / d.noise_floor_v));
     }
     for (seed, named, ratio) in &results {
@@ -999,9 +1007,12 @@ fn single_sine_outcomes(seeds: &[u64]) -> Vec<(u64, Vec<String>, f64)> {
 }
 
 /// What the workflow achieves on the single-sine records today: hysteresis named, no
-/// slow effect but `offset` or `nonlinear-gain` beside it, and the residual within 8x the
-/// floor. Measured on seeds 21 and 22 (session 21, the truths drawn inside the Preisach
-/// class): 3.24x (hysteresis and offset, 26.9 mV for the truth's 25.5 mV; 1.79x after the
+/// slow effect but `offset` or `nonlinear-gain` beside it, and the residual within the
+/// issue's 2x the floor. Measured on seeds 21 and 22 since session 24 (the rise split, which
+/// the records choose: hysteresis and drift alone left 3.7 and 1.5 noise variances against
+/// 224 and 129 with the band split): 1.66x (hysteresis and `nonlinear-gain`, the truth's
+/// 25.5 mV offset not named: the three static shapes explain alike) and 1.39x (hysteresis
+/// alone; the 21.3 mV offset not named). Session 21: 3.24x (hysteresis and offset, 26.9 mV for the truth's 25.5 mV; 1.79x after the
 /// first cycle) and 4.92x (hysteresis alone: the true 21.3 mV offset is fitted at 30.8 mV and
 /// removed by the final check, the residual without it sitting only 2.3 mV off zero; 3.15x
 /// after the first cycle). The history on the two seeds as drawn before session 21 (seed 22
@@ -1026,12 +1037,18 @@ fn single_sine_record_names_hysteresis_and_its_start() {
                 .all(|n| ["hysteresis", "offset", "nonlinear-gain"].contains(&n.as_str())),
             "seed {seed}: false name in {named:?}"
         );
-        assert!(ratio <= 8.0, "seed {seed}: final {ratio:.2}x the floor");
+        assert!(ratio <= 2.0, "seed {seed}: final {ratio:.2}x the floor");
     }
 }
 
 /// Issue #12's requirement on the single-sine record: hysteresis and offset named, the
-/// residual within 2x its floor, on eight seeds. Not met yet (session 21: offset named on 3
+/// residual within 2x its floor, on eight seeds. Not met yet. Session 24 (the rise split):
+/// final 1.27-5.76x the floor (median 3.5x), under 2x on 21, 22 and 24, the offset named on
+/// none (the static shapes explain alike beside the table: none named, or `nonlinear-gain`
+/// through a swap for a drift on 21 and 24); hysteresis and drift alone leave 1.5-25 noise
+/// variances (1.2-5.0x), and what the final check then drops is that level. `SINE_SEEDS=21,27`
+/// runs some seeds, `GAP_DEBUG=1` prints the candidates tried at each step. Before (session
+/// 21: offset named on 3
 /// of 8, final 2.99-7.05x the floor, median 4.9x, a `sensor-gain` the truth lacks on seed 23;
 /// after the first cycle 1.43-4.39x): the
 /// truth's start, every operator centred on the first input at the sine's bottom, needs a
@@ -1039,9 +1056,12 @@ fn single_sine_record_names_hysteresis_and_its_start() {
 /// (half a grid interval, 0.11 V) are smeared over it. Run with `--ignored`; it prints every
 /// seed's outcome before it fails.
 #[test]
-#[ignore = "issue #12: not met yet (offset named on 3 of 8 seeds, 2.99-7.05x the floor)"]
+#[ignore = "issue #12: not met yet (offset named on 0 of 8 seeds, 1.27-5.76x the floor)"]
 fn single_sine_record_names_hysteresis_and_offset() {
-    let outcomes = single_sine_outcomes(&SINGLE_SINE_SEEDS);
+    let seeds: Vec<u64> = std::env::var("SINE_SEEDS").map_or(SINGLE_SINE_SEEDS.to_vec(), |s| {
+        s.split(',').map(|x| x.parse().unwrap()).collect()
+    });
+    let outcomes = single_sine_outcomes(&seeds);
     let failed: Vec<String> = outcomes
         .iter()
         .filter(|(_, named, ratio)| {

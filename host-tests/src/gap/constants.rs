@@ -201,3 +201,12 @@ pub const STATIC_TELL_RATIO: f64 = 1.5;
 /// times as much with the scale; a tenth is far tighter than [`STATIC_TELL_RATIO`], so a true
 /// curvature that carries more than a tenth of what is left is not traded for a scale.
 pub const OCCAM_SWAP_RATIO: f64 = 1.1;
+
+/// How much less hysteresis and drift must leave with the [`super::everett::CentreLine::Rise`]
+/// split than with the band split for the rise split to be kept, as a ratio of the sums of
+/// mean squares in noise variances (our assumption, measured in session 24: where the records'
+/// first rise shows what no start memory of the band split sets the ratio was 0.011-0.20 (the
+/// eight single PI sines of issue #12; families cases 1042, 1060, 1068), elsewhere 0.60-2.2
+/// (families cases 1001, 1006, 1012, 1014, 1020, 1035, 1044, 1057, 1071: the rise split
+/// starts the relays below the records on, so it can leave more); 0.5 lies in the gap).
+pub const RISE_CHOICE_RATIO: f64 = 0.5;

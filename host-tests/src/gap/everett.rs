@@ -63,6 +63,21 @@
 //! ([`CentreLine::fits`]), so the split has fewer columns than before (the gap bench
 //! 9.1 s -> 7.0 s). The [`CentreLine::Band`] split is unchanged.
 //!
+//! # The rise split (session 24)
+//! A record that starts at its lowest input and never goes back below it (one sine from its
+//! bottom) shows the relays below its inputs only on its first rise: those the stage had on
+//! stay on, the others switch on once. For a PI stage at rest after a scan that died away at
+//! the first input `u0`, the relays of radius `r` are on where `alpha < u0 + r`, a threshold
+//! that differs by radius; the table clips all of them onto its bottom line, whose relays a
+//! start memory can set only by one threshold. The band split then fits the first rise
+//! wrongly, and the least squares spread the error over the record: on the single PI sines of
+//! issue #12 the basis alone left 5.0-11.4 mV, fitted after the first cycle only 0.6-1.7 mV.
+//! [`CentreLine::Rise`] is the band split with those relays on at the start and
+//! once-switching relays on the grid line above them ([`rise_col`], weights >= 0, so the
+//! table stays valid): the first rise is then fitted as the records show it. The records
+//! choose it (`select`: kept where hysteresis and drift leave less than
+//! [`crate::gap::RISE_CHOICE_RATIO`] of the band split's).
+//!
 //! # Resolution and regulariser
 //! Radii: [`HYST_RADII`] at odd multiples of half the table's grid interval ([`radius_v`]:
 //! the basis follows the table's own resolution instead of a fixed list of radii);
@@ -127,18 +142,33 @@ pub const HYST_EDGE_COLS: usize = 2 * EDGE_TENTS;
 /// radius ([`out_col`]).
 pub const HYST_OUT_COLS: usize = 2 * HYST_RADII;
 
-/// Columns whose weights are kept non-negative (densities of relays): the loop columns, the
-/// edge columns and the outside columns.
-pub const HYST_NONNEG_COLS: usize = HYST_LOOP_COLS + HYST_EDGE_COLS + HYST_OUT_COLS;
+/// Columns of the once-switching relays of the [`CentreLine::Rise`] split ([`rise_col`]):
+/// [`EDGE_TENTS`] on the line [`RISE_NODE`].
+pub const HYST_RISE_COLS: usize = EDGE_TENTS;
 
-/// Columns of the basis: the loop columns, the edge columns, the outside columns, then one
-/// reversible column per band ([`rev_col`]).
+/// Columns whose weights are kept non-negative (densities of relays): the loop columns, the
+/// edge columns, the outside columns and the once-switching columns.
+pub const HYST_NONNEG_COLS: usize =
+    HYST_LOOP_COLS + HYST_EDGE_COLS + HYST_OUT_COLS + HYST_RISE_COLS;
+
+/// Columns of the basis: the non-negative ones, then one reversible column per band
+/// ([`rev_col`]).
 pub const HYST_COLS: usize = HYST_NONNEG_COLS + HYST_BANDS;
 
 /// Column index of band `k`'s reversible part (`clamp(u, band) - c_k`: a change of the
 /// reversible slope within the band; sign free).
 pub const fn rev_col(k: usize) -> usize {
     HYST_NONNEG_COLS + k
+}
+
+/// Column index of once-switching tent `k` ([`CentreLine::Rise`] only): relays whose lower
+/// threshold is the grid line [`RISE_NODE`], below the records' inputs, and whose upper one
+/// the tent spreads. Off at the start above the first input ([`start_memory`]), they switch
+/// on as the input first rises past them and never off (the records do not go down to the
+/// line): the column is the relays less their mass, zero once the input has risen past the
+/// tent, as the span split's bottom edge columns.
+pub const fn rise_col(k: usize) -> usize {
+    HYST_LOOP_COLS + HYST_EDGE_COLS + HYST_OUT_COLS + k
 }
 
 /// Column index of edge tent `k` at the bottom (`top == false`) or top of the span.
@@ -161,10 +191,12 @@ pub const fn radius_group(c: usize) -> usize {
         c / HYST_BANDS
     } else if c < HYST_LOOP_COLS + HYST_EDGE_COLS {
         HYST_RADII + (c - HYST_LOOP_COLS) / EDGE_TENTS
-    } else if c < HYST_NONNEG_COLS {
+    } else if c < HYST_LOOP_COLS + HYST_EDGE_COLS + HYST_OUT_COLS {
         (c - HYST_LOOP_COLS - HYST_EDGE_COLS) / 2
+    } else if c < HYST_NONNEG_COLS {
+        HYST_RADII + 2
     } else {
-        HYST_RADII + 2 + (c - HYST_NONNEG_COLS)
+        HYST_RADII + 3 + (c - HYST_NONNEG_COLS)
     }
 }
 
@@ -209,6 +241,8 @@ pub const HYST_BAND_SMOOTH: f64 = 0.1;
 ///   basis alone on that table's static output over the identification protocol's slow record:
 ///   `Band` 14.5 mV, `Span` 0.3 mV; on two PI truths over a 1 Hz sine, `Band` 0.5 and 2.1 mV,
 ///   `Span` 346 and 273 mV. Neither split serves both families.
+/// * [`CentreLine::Rise`]: the band split with the relays below the records on at the start
+///   and once-switching relays above them (module doc, "The rise split").
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
 #[serde(rename_all = "lowercase")]
 pub enum CentreLine {
@@ -216,6 +250,9 @@ pub enum CentreLine {
     Band,
     /// Each element less its centre line over the records' span.
     Span,
+    /// The band split with the relays below the records on at the start and once-switching
+    /// relays above them ([`rise_col`], [`start_memory`]).
+    Rise,
 }
 
 impl CentreLine {
@@ -223,9 +260,15 @@ impl CentreLine {
     /// [`HYST_BANDS_SPAN`]); the loop columns of the others stay zero.
     pub const fn bands(self) -> usize {
         match self {
-            CentreLine::Band => HYST_BANDS_BAND,
+            CentreLine::Band | CentreLine::Rise => HYST_BANDS_BAND,
             CentreLine::Span => HYST_BANDS_SPAN,
         }
+    }
+
+    /// Does this split carry the once-switching columns ([`rise_col`]) and start from the
+    /// memory [`start_memory`] makes? Only [`CentreLine::Rise`].
+    pub const fn rises(self) -> bool {
+        matches!(self, CentreLine::Rise)
     }
 
     /// Does this split carry the edge columns ([`edge_col`]) on a range whose margin puts
@@ -244,6 +287,12 @@ impl CentreLine {
                 "band",
                 "each centre band's relays less clamp(u, band), a PI stage's loop",
             ),
+            CentreLine::Rise => (
+                "rise",
+                "each centre band's relays less clamp(u, band), the relays below the records on \
+                 at their start and once-switching relays above them: a PI stage's loop whose \
+                 first rise no start memory of the band split sets",
+            ),
             CentreLine::Span => (
                 "span",
                 "each element less its centre line over the records' span, with edge relays: \
@@ -260,8 +309,10 @@ impl CentreLine {
         if c < HYST_LOOP_COLS {
             let (i, k) = (c / HYST_BANDS, c % HYST_BANDS);
             k < self.bands() && (!self.edges() || span_inside(i, k, self.bands()))
-        } else if c < HYST_NONNEG_COLS {
+        } else if c < HYST_LOOP_COLS + HYST_EDGE_COLS + HYST_OUT_COLS {
             self.edges()
+        } else if c < HYST_NONNEG_COLS {
+            self.rises()
         } else {
             c < HYST_FIT_COLS
         }
@@ -394,6 +445,31 @@ pub fn start_candidates(u0_v: f64, range: (f64, f64)) -> Vec<Vec<f64>> {
     out
 }
 
+/// The grid line of the once-switching relays ([`rise_col`]) and the lowest turning point of
+/// the [`CentreLine::Rise`] split's start memory ([`start_memory`]): one interval above the
+/// table's bottom, below the records' inputs by most of [`HYST_RANGE_MARGIN_V`] (two
+/// intervals are 0.47 V on a 10 V table).
+pub const RISE_NODE: usize = 1;
+
+/// The table's memory at the records' start for the start `start_v` (turning points after
+/// coming up from the bottom, [`start_candidates`]) under split `form`: `start_v` itself,
+/// but for [`CentreLine::Rise`] first down from the top to the line [`RISE_NODE`], then
+/// `start_v` with its points kept at or above that line, cut to
+/// [`crate::io::model_file::MAX_START_TURNS`]. The descent leaves every relay on the table's
+/// bottom line on (the relays below the records' inputs a stage switched on in its earlier
+/// motion, clipped onto that line) and those on the line above off; the table's model file
+/// keeps the whole memory (`[hysteresis] start_turns_v`).
+pub fn start_memory(range: (f64, f64), form: CentreLine, start_v: &[f64]) -> Vec<f64> {
+    if !form.rises() {
+        return start_v.to_vec();
+    }
+    let floor = node_v(range, RISE_NODE);
+    let mut h = vec![range.1, floor];
+    h.extend(start_v.iter().map(|&v| v.clamp(floor, range.1)));
+    h.truncate(crate::io::model_file::MAX_START_TURNS);
+    h
+}
+
 /// Node `i` of the grid over `range`, volts.
 fn node_v(range: (f64, f64), i: usize) -> f64 {
     range.0 + (range.1 - range.0) * i as f64 / INTERVALS as f64
@@ -474,17 +550,21 @@ fn edge_mass(k: usize, range: (f64, f64)) -> f64 {
 /// ends at the records' extremes, as a stage's own table may, has such relays on its edges
 /// (the relays beyond its range, clipped onto them); the play basis, whose relays switch
 /// at `c +- r`, reaches those lines only at single points.
-fn t_edge(a: f64, b: f64, top: bool, k: usize, range: (f64, f64)) -> f64 {
+fn t_edge(a: f64, b: f64, top: bool, k: usize, range: (f64, f64), form: CentreLine) -> f64 {
     let eps = 1e-9 * (range.1 - range.0);
+    // The edge relays sit on the span's edges, the once-switching ones on line RISE_NODE.
+    let (lo, hi) = if form.edges() {
+        span_v(range)
+    } else {
+        (node_v(range, RISE_NODE), range.1)
+    };
     if top {
-        let hi = span_v(range).1;
         if a >= hi - eps {
             edge_tent_integral(b, hi, k, range)
         } else {
             0.0
         }
     } else {
-        let lo = span_v(range).0;
         if b <= lo + eps {
             edge_tent_integral(lo, a, k, range)
         } else {
@@ -567,7 +647,10 @@ pub fn columns(
     start_v: &[f64],
     form: CentreLine,
 ) -> Vec<Vec<f64>> {
-    let start: Vec<f32> = start_v.iter().map(|&v| v as f32).collect();
+    let start: Vec<f32> = start_memory(range, form, start_v)
+        .iter()
+        .map(|&v| v as f32)
+        .collect();
     let mut out = vec![vec![0.0; rows.len()]; HYST_COLS];
     // Each element's table runs over the whole record (a 150 s record at 1 kHz and the span
     // split's 164 elements: about 0.5 s on one core), so the elements are shared out over the
@@ -589,19 +672,18 @@ pub fn columns(
     // columns are the relays less their mass (zero when all are on), and the table's offset
     // carries the mass ([`HystFit::section`]), so that they do not make a constant the
     // `offset` then takes back.
-    for top in [false, true].into_iter().filter(|_| form.edges()) {
+    for top in [false, true] {
         for k in 0..EDGE_TENTS {
-            let e = grid(range, |a, b| t_edge(a, b, top, k, range));
+            let at = if form.edges() {
+                edge_col(top, k)
+            } else if form.rises() && !top {
+                rise_col(k)
+            } else {
+                continue;
+            };
+            let e = grid(range, |a, b| t_edge(a, b, top, k, range, form));
             let on = if top { 0.0 } else { edge_mass(k, range) };
-            table_column(
-                &e,
-                range,
-                &start,
-                u_v,
-                rows,
-                |_| on,
-                &mut out[edge_col(top, k)],
-            );
+            table_column(&e, range, &start, u_v, rows, |_| on, &mut out[at]);
         }
     }
     for k in 0..HYST_BANDS {
@@ -632,7 +714,7 @@ fn element(
     let r = radius_v(range, i);
     let e = grid(range, |a, b| t_rk(a, b, r, centres, range));
     let rev: Box<dyn Fn(f64) -> f64> = match form {
-        CentreLine::Band => Box::new(move |u: f64| in_band(u, centres, range)),
+        CentreLine::Band | CentreLine::Rise => Box::new(move |u: f64| in_band(u, centres, range)),
         CentreLine::Span => centre_line(&e, range),
     };
     (e, rev)
@@ -814,7 +896,8 @@ impl HystFit {
             dc_gain: None,
             loop_width_frac: None,
             everett_v: Some(e),
-            start_turns_v: (!self.start_v.is_empty()).then(|| self.start_v.clone()),
+            start_turns_v: Some(start_memory(range, self.form, &self.start_v))
+                .filter(|h| !h.is_empty()),
         }
     }
 
@@ -823,7 +906,10 @@ impl HystFit {
     /// is lower by it.
     fn bottom_edge_mass_v(&self) -> f64 {
         (0..EDGE_TENTS)
-            .map(|k| self.weights[edge_col(false, k)] * edge_mass(k, self.range))
+            .map(|k| {
+                (self.weights[edge_col(false, k)] + self.weights[rise_col(k)])
+                    * edge_mass(k, self.range)
+            })
             .sum()
     }
 
@@ -855,9 +941,15 @@ impl HystFit {
             }
             for top in [false, true] {
                 for k in 0..EDGE_TENTS {
-                    let w = self.weights[edge_col(top, k)];
+                    let w = if self.form.edges() {
+                        self.weights[edge_col(top, k)]
+                    } else if top || !self.form.rises() {
+                        0.0
+                    } else {
+                        self.weights[rise_col(k)]
+                    };
                     if w != 0.0 {
-                        v += w * t_edge(a, b, top, k, range);
+                        v += w * t_edge(a, b, top, k, range, self.form);
                     }
                 }
             }
@@ -931,7 +1023,7 @@ mod tests {
     /// model) to f32 rounding: the basis and the table are one representation.
     #[test]
     fn the_table_reproduces_the_weighted_columns() {
-        for form in [CentreLine::Band, CentreLine::Span] {
+        for form in [CentreLine::Band, CentreLine::Span, CentreLine::Rise] {
             reproduces(form);
         }
     }
@@ -966,6 +1058,10 @@ mod tests {
             weights[out_col(false, 5)] = 0.05;
             weights[out_col(true, 8)] = 0.03;
         }
+        if form.rises() {
+            weights[rise_col(4)] = 0.05;
+            weights[rise_col(6)] = 0.03;
+        }
         let g = params::PLANT_GAIN;
         let fit = HystFit {
             range,
@@ -973,9 +1069,10 @@ mod tests {
             start_v: vec![],
             form,
         };
-        let t = fit.section(g).table().expect("a valid table");
+        let section = fit.section(g);
+        let t = section.table().expect("a valid table");
         let mut mem = HysteresisMemory::new();
-        mem.reset(&t, u[0] as f32);
+        mem.reset_after(&t, &section.start_history_v(), u[0] as f32);
         let y: Vec<f32> = u.iter().map(|&v| t.forward(&mut mem, v as f32)).collect();
         let mut worst = 0.0f64;
         for (j, &row) in rows.iter().enumerate() {
@@ -999,6 +1096,75 @@ mod tests {
             assert!(swing > 0.1, "edge column swing {swing}");
         } else {
             assert_eq!(swing, 0.0, "{form:?} has no edge columns");
+        }
+        let swing = cols[rise_col(6)].iter().fold(0.0f64, |m, v| m.max(v.abs()));
+        if form.rises() {
+            assert!(swing > 0.1, "once-switching column swing {swing}");
+        } else {
+            assert_eq!(swing, 0.0, "{form:?} has no once-switching columns");
+        }
+    }
+
+    /// A Prandtl-Ishlinskii stage started with every operator centred on the first input (the
+    /// rest a scan that died away there leaves), on a sine that starts at its bottom: the
+    /// relays below the records are on at the start where `alpha < u0 + r`, a threshold that
+    /// differs by radius, which no start memory of the band split sets (they all sit on the
+    /// table's bottom line); the rise split's once-switching relays carry the difference. The
+    /// basis alone (least squares with a constant, the loop weights non-negative) on the
+    /// truth's noise-free output: truths not drawn by the single-sine test, radii off the
+    /// basis' own.
+    #[test]
+    fn the_rise_split_fits_a_first_rise_the_band_split_cannot() {
+        let rate = 2000.0;
+        let n = 6000;
+        let u: Vec<f64> = (0..n)
+            .map(|i| 5.0 - 4.5 * (2.0 * std::f64::consts::PI * i as f64 / rate).cos())
+            .collect();
+        let rows: Vec<usize> = (0..n).step_by(3).collect();
+        let g = params::PLANT_GAIN;
+        let truths: [(&[f64], &[f64]); 2] = [
+            (&[0.07, 0.4, 1.3, 2.6, 4.1], &[0.12, 0.06, 0.05, 0.05, 0.04]),
+            (&[0.2, 0.75, 1.9, 3.3, 4.7], &[0.05, 0.08, 0.03, 0.06, 0.05]),
+        ];
+        for (radii, weights) in truths {
+            let mut z = vec![u[0]; radii.len()];
+            let y: Vec<f64> = u
+                .iter()
+                .map(|&x| {
+                    let mut h = 0.0;
+                    for ((zi, r), w) in z.iter_mut().zip(radii).zip(weights) {
+                        *zi = zi.clamp(x - r, x + r);
+                        h += w * (*zi - x);
+                    }
+                    g * h
+                })
+                .collect();
+            let rms = |form: CentreLine| -> f64 {
+                let range = hyst_range(0.5, 9.5, form);
+                let cols = columns(&u, &rows, range, &[], form);
+                let used: Vec<usize> = (0..HYST_FIT_COLS).filter(|&c| form.fits(c)).collect();
+                let m = used.len() + 1;
+                let a = nalgebra::DMatrix::from_fn(rows.len(), m, |i, j| {
+                    used.get(j).map_or(1.0, |&c| cols[c][i])
+                });
+                let b = nalgebra::DVector::from_iterator(rows.len(), rows.iter().map(|&i| y[i]));
+                let mut gram = a.transpose() * &a;
+                crate::gap::nnls::ridge(&mut gram);
+                let nonneg: Vec<bool> = (0..m).map(|j| j < used.len()).collect();
+                let x = crate::gap::nnls::nnls_normal(&gram, &(a.transpose() * &b), &nonneg)
+                    .expect("a solution");
+                let r = &b - &a * &x;
+                (r.norm_squared() / r.len() as f64).sqrt()
+            };
+            let (band, rise) = (rms(CentreLine::Band), rms(CentreLine::Rise));
+            // Measured 5.62 / 5.76 mV against 0.91 / 1.01 mV. The bounds: the rise split takes
+            // most of what the band split leaves (at most 0.3 of it), down to the table's own
+            // resolution (the truths' Everett functions sampled on the grid leave 0.5-2.8 mV
+            // over a sine after its first cycle, GAP.md session 24).
+            assert!(
+                rise < 0.3 * band && rise < 1.5e-3,
+                "radii {radii:?}: band split {band} V, rise split {rise} V"
+            );
         }
     }
 

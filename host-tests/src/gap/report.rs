@@ -13,6 +13,7 @@
 use super::catalogue;
 use super::constants::CANNOT_TELL_RATIO;
 use super::data::Data;
+use super::everett::CentreLine;
 use super::select::Diagnosis;
 use crate::io::model_file::ModelFile;
 use anyhow::Context;
@@ -67,9 +68,20 @@ impl Diagnosis {
             let c = &self.centre_line;
             let (kept, other) = c.kept_and_other();
             let (name, what) = c.chosen.describe();
+            let other_name = if c.chosen == CentreLine::Span {
+                "band"
+            } else {
+                "span"
+            };
+            // The band split's figure beside the rise split's, whichever was kept.
+            let band = match (c.chosen, c.rise_noise_var) {
+                (CentreLine::Rise, _) => format!(" (the band split {})", fmt_num(c.band_noise_var)),
+                (CentreLine::Band, Some(r)) => format!(" (the rise split {})", fmt_num(r)),
+                _ => String::new(),
+            };
             s.push_str(&format!(
                 "hysteresis basis: the {name} split ({what}): hysteresis and drift alone left {} \
-                 noise variances over the records, the other split {}\n",
+                 noise variances over the records{band}, the {other_name} split {}\n",
                 fmt_num(kept),
                 fmt_num(other)
             ));

@@ -13,8 +13,8 @@ use super::catalogue::{self, EFFECTS, FAST, SLOW};
 use super::constants::{
     CANDIDATE_ROUNDS, CANNOT_TELL_RATIO, CREEP_START_MIN_FLOORS, CREEP_START_SHARE, HOLD_MIN_S,
     MAX_STEPS, MIN_EXPLAINED, OCCAM_SWAP_RATIO, PAIR_FLOOR_RATIO, PRUNE_KEEP_EXCESS_VAR,
-    PRUNE_PER_PARAM, PRUNE_RATIO, REST_ZERO_SHOWN_MIN, REST_ZERO_SIGMAS, STATIC_TELL_RATIO,
-    STOP_FLOOR_RATIO, STRUCTURE_ROUNDS,
+    PRUNE_PER_PARAM, PRUNE_RATIO, REST_ZERO_SHOWN_MIN, REST_ZERO_SIGMAS, RISE_CHOICE_RATIO,
+    STATIC_TELL_RATIO, STOP_FLOOR_RATIO, STRUCTURE_ROUNDS,
 };
 use super::data::{Data, min_max, mse, noise_floor, sim, simulate_all};
 use super::everett::CentreLine;
@@ -130,6 +130,10 @@ pub struct CentreChoice {
     pub band_noise_var: f64,
     /// The same with the `Span` split.
     pub span_noise_var: f64,
+    /// The same with the `Rise` split, when the band split left less than the span split and
+    /// the rise split was tried ([`RISE_CHOICE_RATIO`]).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub rise_noise_var: Option<f64>,
     /// When those two were within [`CANNOT_TELL_RATIO`] (RMS) of each other and both splits'
     /// diagnoses ran (the one naming fewer effects kept): the other's outcome (absent from the
     /// JSON when the loop alone chose).
@@ -155,6 +159,10 @@ impl CentreChoice {
         match self.chosen {
             CentreLine::Band => (self.band_noise_var, self.span_noise_var),
             CentreLine::Span => (self.span_noise_var, self.band_noise_var),
+            CentreLine::Rise => (
+                self.rise_noise_var.unwrap_or(self.band_noise_var),
+                self.span_noise_var,
+            ),
         }
     }
 }
@@ -1573,9 +1581,13 @@ fn held_level_error(data: &[Data], sims: &[Vec<f64>], var: &[f64]) -> Option<f64
 /// fit fails). Which memoryless part a table's relays carry is a property of the stage's
 /// density, not of the workflow: a PI stage's loop bends its centre line near the records'
 /// extremes, the thesis' table keeps it straight, and the split that fixes the wrong one
-/// leaves 15-350 mV that `nonlinear-gain` and `sensor-gain` then take falsely. Returns the
-/// chosen split's basis, the other's (for its own diagnosis where the two leave nearly as
-/// much, [`diagnose`]) and the choice.
+/// leaves 15-350 mV that `nonlinear-gain` and `sensor-gain` then take falsely. Where the
+/// band split is kept, the rise split ([`CentreLine::Rise`]) is fitted too and kept instead
+/// if it leaves less than [`RISE_CHOICE_RATIO`] of the band split's: records whose first rise
+/// no start memory of the band split sets (on the single PI sines of issue #12 hysteresis and
+/// drift left 1.5 to 25 noise variances with it, 129 to 235 with the band split). Returns the
+/// chosen split's basis, the span or band split's (for its own diagnosis where the two leave
+/// nearly as much, [`diagnose`]) and the choice.
 fn choose_centre_line(
     base: &ModelFile,
     data: &[Data],
@@ -1598,16 +1610,23 @@ fn choose_centre_line(
     // (the two fits side by side: each is one long drift search)
     let both = crate::util::par_map(&[&band, &span], |x| score(x));
     let (sb, ss) = (both[0], both[1]);
-    let choice = |chosen| CentreChoice {
+    let choice = |chosen, rise_noise_var| CentreChoice {
         chosen,
         band_noise_var: sb,
         span_noise_var: ss,
+        rise_noise_var,
         by_diagnosis: None,
     };
     if ss < sb {
-        (span, band, choice(CentreLine::Span))
+        return (span, band, choice(CentreLine::Span, None));
+    }
+    // The band split's first rise: the rise split kept where it leaves far less.
+    let rise = band.with_form(data, CentreLine::Rise);
+    let sr = score(&rise);
+    if sr < RISE_CHOICE_RATIO * sb {
+        (rise, span, choice(CentreLine::Rise, Some(sr)))
     } else {
-        (band, span, choice(CentreLine::Band))
+        (band, span, choice(CentreLine::Band, Some(sr)))
     }
 }
 
@@ -1981,6 +2000,7 @@ mod tests {
                 chosen: split,
                 band_noise_var: 100.0,
                 span_noise_var: 90.0,
+                rise_noise_var: None,
                 by_diagnosis: None,
             },
         }

@@ -27,7 +27,7 @@
 //! first-second residual: the candidates are the states a lab's stage is left in).
 
 use super::data::{Data, mse, sim};
-use super::everett::start_candidates;
+use super::everett::{start_candidates, start_memory};
 use super::select::refit_slow;
 use super::slow_fit::SlowRegressors;
 use crate::io::model_file::ModelFile;
@@ -148,10 +148,11 @@ pub fn search(
         // Residual power change over each record, for a candidate memory: simulated over its
         // head, ranked by the table's difference beyond.
         let gain_of = |c: &Vec<f64>| -> Option<f64> {
-            let hist: Vec<f32> = c.iter().map(|&v| v as f32).collect();
+            let full = start_memory(slow_x.range(), slow_x.form(), c);
+            let hist: Vec<f32> = full.iter().map(|&v| v as f32).collect();
             let mut m = model.clone();
             if let Some(h) = m.hysteresis.as_mut() {
-                h.start_turns_v = (!c.is_empty()).then(|| c.clone());
+                h.start_turns_v = (!full.is_empty()).then_some(full);
             }
             let mut delta = 0.0;
             for (r, (d, s_now)) in data.iter().zip(&sims_now).enumerate() {
@@ -250,7 +251,8 @@ pub fn search(
             let x2 = slow_x.with_start(data, &c);
             let mut m2 = model.clone();
             if let Some(h) = m2.hysteresis.as_mut() {
-                h.start_turns_v = (!c.is_empty()).then(|| c.clone());
+                let full = start_memory(slow_x.range(), slow_x.form(), &c);
+                h.start_turns_v = (!full.is_empty()).then_some(full);
             }
             let m2 = refit_slow(&m2, &[], data, &x2, u_range)?;
             let sims: Vec<Vec<f64>> = par_map(data, |d| sim(&m2, d).ok())
