@@ -1009,9 +1009,9 @@ fn single_sine_outcomes(seeds: &[u64]) -> Vec<(u64, Vec<String>, f64)> {
 /// What the workflow achieves on the single-sine records today: hysteresis named, no
 /// slow effect but `offset` or `nonlinear-gain` beside it, and the residual within the
 /// issue's 2x the floor. Measured on seeds 21 and 22 since session 24 (the rise split, which
-/// the records choose: hysteresis and drift alone left 3.7 and 1.5 noise variances against
+/// the records choose: hysteresis and drift alone left 3.7 and 1.7 noise variances against
 /// 224 and 129 with the band split): 1.66x (hysteresis and `nonlinear-gain`, the truth's
-/// 25.5 mV offset not named: the three static shapes explain alike) and 1.39x (hysteresis
+/// 25.5 mV offset not named: the three static shapes explain alike) and 1.34x (hysteresis
 /// alone; the 21.3 mV offset not named). Session 21: 3.24x (hysteresis and offset, 26.9 mV for the truth's 25.5 mV; 1.79x after the
 /// first cycle) and 4.92x (hysteresis alone: the true 21.3 mV offset is fitted at 30.8 mV and
 /// removed by the final check, the residual without it sitting only 2.3 mV off zero; 3.15x
@@ -1045,7 +1045,7 @@ fn single_sine_record_names_hysteresis_and_its_start() {
 /// residual within 2x its floor, on eight seeds. Not met yet. Session 24 (the rise split):
 /// final 1.27-5.76x the floor (median 3.5x), under 2x on 21, 22 and 24, the offset named on
 /// none (the static shapes explain alike beside the table: none named, or `nonlinear-gain`
-/// through a swap for a drift on 21 and 24); hysteresis and drift alone leave 1.5-25 noise
+/// through a swap for a drift on 21 and 24); hysteresis and drift alone leave 1.7-25 noise
 /// variances (1.2-5.0x), and what the final check then drops is that level. `SINE_SEEDS=21,27`
 /// runs some seeds, `GAP_DEBUG=1` prints the candidates tried at each step. Before (session
 /// 21: offset named on 3

@@ -30,7 +30,9 @@
 //!    shares), then **swaps** of slow effects the records cannot tell apart.
 //!
 //! Steps 4-7 run with the hysteresis basis' split the records choose
-//! ([`everett::CentreLine`]); where hysteresis and drift alone leave the two splits within
+//! ([`everett::CentreLine`]: band, span, or the band split's rise variant where the
+//! records' first rise needs it); where hysteresis and drift alone leave the band and span
+//! splits within
 //! [`CANNOT_TELL_RATIO`] of each other and the diagnosis names hysteresis without ending at
 //! the floor, they run under the other split too and the diagnosis naming fewer effects is
 //! kept.

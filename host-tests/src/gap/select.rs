@@ -122,16 +122,19 @@ pub struct Diagnosis {
 /// choose by and both splits' diagnoses ran, the other's outcome.
 #[derive(Clone, Debug, serde::Serialize)]
 pub struct CentreChoice {
-    /// The split of the diagnosis kept: the one whose hysteresis and drift left less, unless
-    /// [`Self::by_diagnosis`] says the other split's diagnosis named fewer effects.
+    /// The split of the diagnosis kept: the one whose hysteresis and drift left less (the
+    /// rise split only where it left less than [`RISE_CHOICE_RATIO`] of the band split's),
+    /// unless [`Self::by_diagnosis`] says the other split's diagnosis named fewer effects.
     pub chosen: CentreLine,
     /// With the `Band` split: the sum over records of the mean squared residual, in noise
     /// variances (`null` in JSON when the fit failed).
     pub band_noise_var: f64,
     /// The same with the `Span` split.
     pub span_noise_var: f64,
-    /// The same with the `Rise` split, when the band split left less than the span split and
-    /// the rise split was tried ([`RISE_CHOICE_RATIO`]).
+    /// The same with the `Rise` split, fitted whenever the band split left no more than the
+    /// span split (kept or not: [`RISE_CHOICE_RATIO`]). Where it is kept the span split left
+    /// more than twice it, beyond `CANNOT_TELL_RATIO`, so the span split's diagnosis never
+    /// runs beside it.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub rise_noise_var: Option<f64>,
     /// When those two were within [`CANNOT_TELL_RATIO`] (RMS) of each other and both splits'
@@ -1585,7 +1588,7 @@ fn held_level_error(data: &[Data], sims: &[Vec<f64>], var: &[f64]) -> Option<f64
 /// band split is kept, the rise split ([`CentreLine::Rise`]) is fitted too and kept instead
 /// if it leaves less than [`RISE_CHOICE_RATIO`] of the band split's: records whose first rise
 /// no start memory of the band split sets (on the single PI sines of issue #12 hysteresis and
-/// drift left 1.5 to 25 noise variances with it, 129 to 235 with the band split). Returns the
+/// drift left 1.7 to 25 noise variances with it, 129 to 235 with the band split). Returns the
 /// chosen split's basis, the span or band split's (for its own diagnosis where the two leave
 /// nearly as much, [`diagnose`]) and the choice.
 fn choose_centre_line(

@@ -9,7 +9,9 @@
 //! `effect` joins with `+` the effects it fitted together: a refit, or `X+offset`),
 //! "noise_floor_v",
 //! "final_rms_v", "unexplained", "cannot_tell", "hysteresis_split": {"chosen",
-//! "band_noise_var", "span_noise_var", "by_diagnosis"}}`; `by_diagnosis` only where both
+//! "band_noise_var", "span_noise_var", "rise_noise_var", "by_diagnosis"}}`; `chosen` is
+//! `"band"`, `"span"` or `"rise"`; `rise_noise_var` only where the rise split was fitted
+//! (the band split left less than the span split); `by_diagnosis` only where both
 //! splits' diagnoses ran: `{"split", "named", "final_noise_var"}` of the one not kept), a
 //! progress bar to stderr.
 
