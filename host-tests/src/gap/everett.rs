@@ -171,6 +171,19 @@ pub const fn rise_col(k: usize) -> usize {
     HYST_LOOP_COLS + HYST_EDGE_COLS + HYST_OUT_COLS + k
 }
 
+/// The column of tent `k` on the bottom (`top == false`) or top line under split `form`: an
+/// edge column for the span split, a once-switching column for the rise split (bottom
+/// only), none for the band split.
+pub const fn tent_col(form: CentreLine, top: bool, k: usize) -> Option<usize> {
+    if form.edges() {
+        Some(edge_col(top, k))
+    } else if form.rises() && !top {
+        Some(rise_col(k))
+    } else {
+        None
+    }
+}
+
 /// Column index of edge tent `k` at the bottom (`top == false`) or top of the span.
 pub const fn edge_col(top: bool, k: usize) -> usize {
     HYST_LOOP_COLS + if top { EDGE_TENTS } else { 0 } + k
@@ -700,11 +713,7 @@ pub fn columns(
     // `offset` then takes back.
     for top in [false, true] {
         for k in 0..EDGE_TENTS {
-            let at = if form.edges() {
-                edge_col(top, k)
-            } else if form.rises() && !top {
-                rise_col(k)
-            } else {
+            let Some(at) = tent_col(form, top, k) else {
                 continue;
             };
             let e = grid(range, |a, b| t_edge(a, b, top, k, range, form));
@@ -941,13 +950,7 @@ impl HystFit {
     /// edge column's for the span split, a once-switching column's for the rise split (bottom
     /// only), none for the band split.
     fn tent_weight(&self, top: bool, k: usize) -> f64 {
-        if self.form.edges() {
-            self.weights[edge_col(top, k)]
-        } else if self.form.rises() && !top {
-            self.weights[rise_col(k)]
-        } else {
-            0.0
-        }
+        tent_col(self.form, top, k).map_or(0.0, |c| self.weights[c])
     }
 
     /// The weighted memoryless parts the loop columns leave out, at the bottom of the range
@@ -1172,18 +1175,17 @@ mod tests {
             (&[0.2, 0.75, 1.9, 3.3, 4.7], &[0.05, 0.08, 0.03, 0.06, 0.05]),
         ];
         for (radii, weights) in truths {
-            let mut z = vec![u[0]; radii.len()];
-            let y: Vec<f64> = u
-                .iter()
-                .map(|&x| {
-                    let mut h = 0.0;
-                    for ((zi, r), w) in z.iter_mut().zip(radii).zip(weights) {
-                        *zi = zi.clamp(x - r, x + r);
-                        h += w * (*zi - x);
-                    }
-                    g * h
-                })
-                .collect();
+            // The stage's output less the table's reversible `g u`, which the basis keeps.
+            let mut truth = crate::oracle::hysteresis_truth::PlayOperatorTruth::new(
+                0.0,
+                1.0 - weights.iter().sum::<f64>(),
+                radii.to_vec(),
+                weights.to_vec(),
+                g,
+                0.0,
+            );
+            truth.centre_on(u[0]);
+            let y: Vec<f64> = u.iter().map(|&x| truth.step(x) - g * x).collect();
             // The basis of `form` started from `start` (the rise split's once-switching
             // columns left out unless `rise`), least squares with a constant: the RMS left.
             let rms = |form: CentreLine, start: &[f64], rise: bool| -> f64 {

@@ -68,11 +68,7 @@ impl Diagnosis {
             let c = &self.centre_line;
             let (kept, other) = c.kept_and_other();
             let (name, what) = c.chosen.describe();
-            let other_name = if c.chosen == CentreLine::Span {
-                "band"
-            } else {
-                "span"
-            };
+            let other_name = c.other().describe().0;
             // The band split's figure beside the rise split's, whichever was kept.
             let band = match (c.chosen, c.rise_noise_var) {
                 (CentreLine::Rise, _) => format!(" (the band split {})", fmt_num(c.band_noise_var)),

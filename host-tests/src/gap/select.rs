@@ -159,13 +159,25 @@ impl CentreChoice {
     /// What hysteresis and drift alone left with the chosen split and with the other, in
     /// noise variances.
     pub fn kept_and_other(&self) -> (f64, f64) {
+        (self.noise_var(self.chosen), self.noise_var(self.other()))
+    }
+
+    /// The split the kept one was weighed against by the loop alone: the band split for the
+    /// span split, the span split for the others.
+    pub fn other(&self) -> CentreLine {
         match self.chosen {
-            CentreLine::Band => (self.band_noise_var, self.span_noise_var),
-            CentreLine::Span => (self.span_noise_var, self.band_noise_var),
-            CentreLine::Rise => (
-                self.rise_noise_var.unwrap_or(self.band_noise_var),
-                self.span_noise_var,
-            ),
+            CentreLine::Span => CentreLine::Band,
+            CentreLine::Band | CentreLine::Rise => CentreLine::Span,
+        }
+    }
+
+    /// What hysteresis and drift alone left with split `form`, in noise variances (the rise
+    /// split's figure where it was fitted, else the band split's).
+    fn noise_var(&self, form: CentreLine) -> f64 {
+        match form {
+            CentreLine::Band => self.band_noise_var,
+            CentreLine::Span => self.span_noise_var,
+            CentreLine::Rise => self.rise_noise_var.unwrap_or(self.band_noise_var),
         }
     }
 }

@@ -80,6 +80,12 @@ impl PlayOperatorTruth {
         }
     }
 
+    /// Come to rest at `u0` after a scan that died away there: every play operator centred on
+    /// it (the Preisach plane's anti-diagonal through `u0`, not on the major curve).
+    pub fn centre_on(&mut self, u0: f64) {
+        self.z.iter_mut().for_each(|z| *z = u0);
+    }
+
     /// Apply input `u` (volts) and return the output (sensor volts).
     pub fn step(&mut self, u: f64) -> f64 {
         let mut v = self.g0 * (u - self.u_min);
