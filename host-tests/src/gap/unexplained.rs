@@ -120,12 +120,61 @@ fn describe(d: &Data, r: &[f64]) -> String {
             1e3 * gap
         ));
     }
-    format!("{time}; {input}; {}", line(r, d.period_s()))
+    format!("{time}; {input}; {}", line(r, &d.u_v, d.period_s()))
+}
+
+/// Share of the input's varying power near a residual line below which the input does not
+/// drive it (our assumption: a Hann window's leakage from a line a decade or more away is
+/// below 1e-6; a harmonic a stage makes from its input is told by its frequency instead).
+pub const UNDRIVEN_SHARE: f64 = 1e-6;
+
+/// Highest harmonic of the input's strongest line that a residual line is said to be (our
+/// assumption: a static shape or a loop bends a sine into its first few harmonics).
+pub const HARMONIC_MAX: f64 = 20.0;
+
+/// Mains frequencies, Hz, and the harmonics of them named as such.
+const MAINS_HZ: [f64; 2] = [50.0, 60.0];
+const MAINS_HARMONICS: usize = 5;
+
+/// What drives the residual's line at `f` Hz (spectrum bin width `df`), in words, or nothing
+/// where the input has power there: a harmonic of the input's own strongest line, or a line
+/// the input does not drive, at a mains frequency or not. A line the input does not drive is
+/// no effect of the stage's that the catalogue could add: interference in the measurement is
+/// the first thing to check on a real record.
+fn drive(f: f64, df: f64, input: &[(f64, f64)]) -> String {
+    let total: f64 = input.iter().map(|b| b.1).sum::<f64>();
+    if total <= 0.0 || f <= 0.0 {
+        return String::new();
+    }
+    let near = |g: f64| (g - f).abs() <= 2.0 * df;
+    let at: f64 = input.iter().filter(|b| near(b.0)).map(|b| b.1).sum();
+    if at > UNDRIVEN_SHARE * total {
+        return String::new();
+    }
+    let f0 = input
+        .iter()
+        .fold((0.0, 0.0), |a, b| if b.1 > a.1 { *b } else { a })
+        .0;
+    let k = (f / f0.max(1e-12)).round();
+    if f0 > 0.0 && (1.0..=HARMONIC_MAX).contains(&k) && (f - k * f0).abs() <= 2.0 * df {
+        return format!(" (harmonic {k:.0} of the input's {f0:.3} Hz)");
+    }
+    let mains = MAINS_HZ
+        .iter()
+        .flat_map(|m| (1..=MAINS_HARMONICS).map(move |h| m * h as f64))
+        .any(|m| (m - f).abs() <= 2.0 * df);
+    if mains {
+        " (the input does not drive it and it sits on a mains frequency: interference in the \
+         measurement rather than the stage?)"
+            .into()
+    } else {
+        " (the input does not drive it)".into()
+    }
 }
 
 /// The strongest line of `r`'s spectrum and its share of the power, in words: one Hann
 /// segment over the record (at most 2^16 samples), the line test's own spectrum routine.
-fn line(r: &[f64], t: f64) -> String {
+fn line(r: &[f64], u: &[f64], t: f64) -> String {
     let n = r.len().min(1 << 16);
     if n < 64 {
         return "too short for a spectrum".into();
@@ -147,9 +196,69 @@ fn line(r: &[f64], t: f64) -> String {
         .map(|(_, b)| b.1)
         .sum();
     let dc_share = 100.0 * m * m * n as f64 / x.iter().map(|e| e * e).sum::<f64>().max(1e-300);
+    let input: Vec<(f64, f64)> = averaged_spectrum(&u[..n], t, n)
+        .into_iter()
+        .map(|(f, a)| (f, a * a))
+        .collect();
+    let df = if p.len() > 1 { p[1].0 - p[0].0 } else { f };
     format!(
-        "strongest residual frequency {f:.3} Hz ({:.0} % of the varying power within 10 % of it); mean {:.2} mV ({dc_share:.0} % of the power)",
+        "strongest residual frequency {f:.3} Hz{} ({:.0} % of the varying power within 10 % of it); mean {:.2} mV ({dc_share:.0} % of the power)",
+        drive(f, df, &input),
         100.0 * near / total,
         1e3 * m
     )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::io::csv::Record;
+
+    /// 10 s at 5 kHz of a 1 Hz sine input (plus a 0.2 V line at `extra_hz` where given), a
+    /// model that follows it exactly, and records with a 3 mV line at `line_hz` added: the
+    /// words on the residual's line.
+    fn words(line_hz: f64, extra_hz: Option<f64>) -> String {
+        let n = 50_000;
+        let t: Vec<f64> = (0..n).map(|i| i as f64 / 5_000.0).collect();
+        let w = |f: f64, x: f64| (2.0 * std::f64::consts::PI * f * x).sin();
+        let u: Vec<f64> = t
+            .iter()
+            .map(|&x| 5.0 + 4.0 * w(1.0, x) + extra_hz.map_or(0.0, |f| 0.2 * w(f, x)))
+            .collect();
+        let sim = u.clone();
+        let y: Vec<f64> = u
+            .iter()
+            .zip(&t)
+            .map(|(v, &x)| v + 3e-3 * (2.0 * std::f64::consts::PI * line_hz * x + 0.3).sin())
+            .collect();
+        let d = Data::from_record("r.csv", Record::new(t, u, Some(y), None).unwrap()).unwrap();
+        locate(&[d], &[sim], &[1e-4]).unwrap().where_
+    }
+
+    /// The residual's strongest line is told as the records show it: on a mains frequency the
+    /// input does not drive (interference), a harmonic of the input's sine, a line the input
+    /// does not drive elsewhere, and nothing where the input drives that frequency itself.
+    #[test]
+    fn the_residual_line_says_what_drives_it() {
+        let mains = words(50.0, None);
+        assert!(
+            mains.contains("50.000 Hz (the input does not drive it and it sits on a mains"),
+            "{mains}"
+        );
+        let harmonic = words(3.0, None);
+        assert!(
+            harmonic.contains("3.000 Hz (harmonic 3 of the input's 1.000 Hz)"),
+            "{harmonic}"
+        );
+        let other = words(37.3, None);
+        assert!(
+            other.contains("Hz (the input does not drive it) ("),
+            "{other}"
+        );
+        let driven = words(37.3, Some(37.3));
+        assert!(
+            !driven.contains("drive") && !driven.contains("harmonic"),
+            "{driven}"
+        );
+    }
 }
