@@ -1391,42 +1391,6 @@ fn diagnose_split(
             });
         }
     }
-    // Never silent on an offset the records cannot see: with a table named, no offset named
-    // or reported, and no rest at 0 V in any record (the one reading that is the sensor's
-    // zero, above), a sensor offset is a constant the table's relays the records never
-    // switch, and its start memory, take up unseen. Say so, with what an offset fitted beside
-    // the table comes to.
-    if named.iter().any(|n| n == "hysteresis")
-        && !named.iter().any(|n| n == "offset")
-        && !catalogue::present(&model, "offset")
-        && !ambiguous
-            .iter()
-            .any(|k| k.alternative == "offset" || k.named == "offset")
-        && signatures::compute(data, &sims, &noise)
-            .rest_zero_v
-            .is_none()
-        && let Some(with) = refit_slow(&model, &["offset"], data, &slow_x, u_range)
-        && let Ok((_, mse_with)) = simulate_all(&with, data)
-    {
-        let fitted_v = with.offset.as_ref().map_or(0.0, |o| o.offset_v);
-        ambiguous.push(CannotTell {
-            named: "hysteresis".into(),
-            alternative: "offset".into(),
-            neither_named: false,
-            rms_v: rms_of(&cur_mse),
-            alternative_rms_v: rms_of(&mse_with),
-            why: format!(
-                "no record rests at 0 V input, where the sensor's reading is its zero: a sensor \
-                 offset is a constant that the table's relays these records never switch, and \
-                 its start memory, hold as well; an offset fitted beside the table comes to \
-                 {:.1} mV and leaves {:.2} mV against {:.2} mV; a rest at 0 V before the \
-                 records (the recommended protocol) tells them apart",
-                1e3 * fitted_v,
-                1e3 * rms_of(&mse_with),
-                1e3 * rms_of(&cur_mse)
-            ),
-        });
-    }
     let mut cannot_tell = cannot_tell(&model, base, &named, data, &slow_x, u_range, &cur_mse);
     // A pair left unnamed at one step whose shape a later step named (told apart then, by the
     // held levels or because the rival no longer explained alike), or the same step beside an
@@ -1481,6 +1445,42 @@ fn diagnose_split(
             rms_v: rms_of(&cur_mse),
             alternative_rms_v: rms_of(&cur_mse),
             why,
+        });
+    }
+    // Never silent on an offset the records cannot see: with a table named, no offset named
+    // or reported, and no rest at 0 V in any record (the one reading that is the sensor's
+    // zero, above), a sensor offset is a constant the table's relays the records never
+    // switch, and its start memory, take up unseen. Say so, with what an offset fitted beside
+    // the table comes to.
+    if named.iter().any(|n| n == "hysteresis")
+        && !named.iter().any(|n| n == "offset")
+        && !catalogue::present(&model, "offset")
+        && !cannot_tell
+            .iter()
+            .any(|k| k.alternative == "offset" || k.named == "offset")
+        && signatures::compute(data, &sims, &noise)
+            .rest_zero_v
+            .is_none()
+        && let Some(with) = refit_slow(&model, &["offset"], data, &slow_x, u_range)
+        && let Ok((_, mse_with)) = simulate_all(&with, data)
+    {
+        let fitted_v = with.offset.as_ref().map_or(0.0, |o| o.offset_v);
+        cannot_tell.push(CannotTell {
+            named: "hysteresis".into(),
+            alternative: "offset".into(),
+            neither_named: false,
+            rms_v: rms_of(&cur_mse),
+            alternative_rms_v: rms_of(&mse_with),
+            why: format!(
+                "no record rests at 0 V input, where the sensor's reading is its zero: a sensor \
+                 offset is a constant that the table's relays these records never switch, and \
+                 its start memory, hold as well, and the records do not pin it (an offset fitted \
+                 beside the table comes to {:.1} mV and leaves {:.2} mV against {:.2} mV); a rest at 0 V before the \
+                 records (the recommended protocol) tells them apart",
+                1e3 * fitted_v,
+                1e3 * rms_of(&mse_with),
+                1e3 * rms_of(&cur_mse)
+            ),
         });
     }
     let unexplained = locate(data, &sims, &noise);
