@@ -840,7 +840,46 @@ fn diagnose_split(
                         });
                     }
                 }
-                let drop: Vec<String> = rivals.into_iter().map(|(r, _, _)| r).chain([e]).collect();
+                let mut drop: Vec<String> = rivals
+                    .into_iter()
+                    .map(|(r, _, _)| r)
+                    .chain([e.clone()])
+                    .collect();
+                // Without holds, a drift that explains alike is one more look-alike (its lags
+                // longer than the reversals' spacing act as a constant and a scale): it goes
+                // with the shapes it stands beside, instead of taking their place as the one
+                // left (it did, and a curvature swapped in for it later stood where a scale
+                // was true: families case 1006).
+                if !any_hold
+                    && let Some(d) = scored.iter().find(|x| {
+                        x.3 && !x.0.refit
+                            && x.0.effect == "drift"
+                            && explain_alike((ex, e_mse), (x.2, &x.0.mse), &var)
+                    })
+                {
+                    if !ambiguous
+                        .iter()
+                        .any(|c: &CannotTell| c.named == e && c.alternative == "drift")
+                    {
+                        ambiguous.push(CannotTell {
+                            named: e.clone(),
+                            alternative: "drift".into(),
+                            neither_named: true,
+                            rms_v: e_rms,
+                            alternative_rms_v: rms_of(&d.0.mse),
+                            why: format!(
+                                "neither is named: no record holds its input for {HOLD_MIN_S} s, \
+                                 {e} would explain {:.0} % of the residual power above the noise \
+                                 floor and drift {:.0} %, and a lag longer than the reversals' \
+                                 spacing acts as a constant and a scale; record holds (the \
+                                 recommended protocol) to tell them apart",
+                                100.0 * ex,
+                                100.0 * d.2
+                            ),
+                        });
+                    }
+                    drop.push("drift".into());
+                }
                 // (the best score among the look-alikes: a pair must beat it)
                 let best_dropped = scored
                     .iter()
@@ -1270,7 +1309,17 @@ fn diagnose_split(
                 // No record may get worse: the score is dominated by the longest record, and
                 // a swap that trades a short fast record for it (an offset for the non-linear
                 // gain of the full thesis stage) is no explanation.
-                let better = no_record_worse(&ms, &cur_mse) && sc < cur_score;
+                // Without holds and beside a table, the score does not put a shape with more
+                // parameters in a named one's place: the two explain alike there (the records
+                // cannot tell a scale from a curvature), and what the extra parameter wins is
+                // the loop's misfit (families case 1006: a curvature for a true scale, 8.26
+                // against 10.54 mV, at 8x the floor).
+                let more_beside_loop = !any_hold
+                    && named.iter().any(|n| n == "hysteresis")
+                    && STATIC_SHAPES.contains(&e.as_str())
+                    && STATIC_SHAPES.contains(&f.as_str())
+                    && catalogue::param_count(f) > catalogue::param_count(e);
+                let better = no_record_worse(&ms, &cur_mse) && sc < cur_score && !more_beside_loop;
                 let occam = occam && alike_count(e) == 1;
                 (shown && (better || occam)).then_some((
                     e.clone(),
