@@ -1221,7 +1221,7 @@ fn single_sine_tells_drift_from_hysteresis() {
             effect == "hysteresis"
                 && c.named == "hysteresis"
                 && c.alternative == "offset"
-                && c.why.starts_with("no record rests at 0 V")
+                && c.why.starts_with(gap::STANDING_OFFSET_NOTE)
         };
         assert!(d.cannot_tell.iter().all(allowed), "{:?}", d.cannot_tell);
         assert!(

@@ -76,4 +76,4 @@ pub mod unexplained;
 
 pub use constants::*;
 pub use data::{Data, load_data, min_max, mse, noise_floor, sim};
-pub use select::{CannotTell, Diagnosis, Options, Step, diagnose};
+pub use select::{CannotTell, Diagnosis, Options, STANDING_OFFSET_NOTE, Step, diagnose};

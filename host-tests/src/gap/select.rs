@@ -13,8 +13,8 @@ use super::catalogue::{self, EFFECTS, FAST, SLOW};
 use super::constants::{
     CANDIDATE_ROUNDS, CANNOT_TELL_RATIO, CREEP_START_MIN_FLOORS, CREEP_START_SHARE, HOLD_MIN_S,
     MAX_STEPS, MIN_EXPLAINED, OCCAM_SWAP_RATIO, PAIR_FLOOR_RATIO, PRUNE_KEEP_EXCESS_VAR,
-    PRUNE_PER_PARAM, PRUNE_RATIO, REST_ZERO_SHOWN_MIN, REST_ZERO_SIGMAS, RISE_CHOICE_RATIO,
-    STATIC_TELL_RATIO, STOP_FLOOR_RATIO, STRUCTURE_ROUNDS,
+    PRUNE_PER_PARAM, PRUNE_RATIO, REST_ZERO_INPUT_V, REST_ZERO_SHOWN_MIN, REST_ZERO_SIGMAS,
+    RISE_CHOICE_RATIO, STATIC_TELL_RATIO, STOP_FLOOR_RATIO, STRUCTURE_ROUNDS,
 };
 use super::data::{Data, min_max, mse, noise_floor, sim, simulate_all};
 use super::everett::CentreLine;
@@ -472,6 +472,14 @@ fn fit_slow_set(
     Some((m, s, ms))
 }
 
+/// The opening words of the note a diagnosis gives where a table is named and the records
+/// hold no reading of the sensor's zero (no rest at 0 V at a record's start, no input down to
+/// the table's low end): a sensor offset is then not told from the table's constant. A note
+/// on the protocol, given whatever the records' residual (tests and tallies tell it from the
+/// notes a step's evidence gives by these words).
+pub const STANDING_OFFSET_NOTE: &str =
+    "no record starts at rest at 0 V input or goes down to the bottom of the table's range";
+
 /// The static shapes of the sensor and the gain: a scale, an offset and a curvature of the
 /// output, which one sine or chirp beside a hysteresis loop can leave nearly collinear.
 const STATIC_SHAPES: [&str; 3] = ["offset", "sensor-gain", "nonlinear-gain"];
@@ -857,6 +865,10 @@ fn diagnose_split(
                             && explain_alike((ex, e_mse), (x.2, &x.0.mse), &var)
                     })
                 {
+                    // (a give-way note of this step, for the shape it now drops, is replaced)
+                    ambiguous.retain(|c: &CannotTell| {
+                        !(c.named == e && c.alternative == "drift" && !c.neither_named)
+                    });
                     if !ambiguous
                         .iter()
                         .any(|c: &CannotTell| c.named == e && c.alternative == "drift")
@@ -1309,13 +1321,14 @@ fn diagnose_split(
                 // No record may get worse: the score is dominated by the longest record, and
                 // a swap that trades a short fast record for it (an offset for the non-linear
                 // gain of the full thesis stage) is no explanation.
-                // Without holds and beside a table, the score does not put a shape with more
-                // parameters in a named one's place: the two explain alike there (the records
-                // cannot tell a scale from a curvature), and what the extra parameter wins is
-                // the loop's misfit (families case 1006: a curvature for a true scale, 8.26
-                // against 10.54 mV, at 8x the floor).
+                // Without holds and beside a table, the score alone does not put a shape with
+                // more parameters in a named one's place: the extra parameter takes up the
+                // loop's misfit as readily as a true curvature, and no held level tells the
+                // two (families case 1006: a curvature for its true scale, 8.26 against
+                // 10.54 mV, at 8x the floor).
                 let more_beside_loop = !any_hold
-                    && named.iter().any(|n| n == "hysteresis")
+                    && (named.iter().any(|n| n == "hysteresis")
+                        || catalogue::present(&model, "hysteresis"))
                     && STATIC_SHAPES.contains(&e.as_str())
                     && STATIC_SHAPES.contains(&f.as_str())
                     && catalogue::param_count(f) > catalogue::param_count(e);
@@ -1449,7 +1462,10 @@ fn diagnose_split(
         if c.neither_named {
             !named.contains(&c.named) && !named.contains(&c.alternative)
         } else {
+            // (a drift that gave way to a shape a later look-alike step dropped: that step's
+            // own pair says so)
             !named.contains(&c.alternative)
+                && (c.alternative != "drift" || named.contains(&c.named))
         }
     });
     cannot_tell.extend(ambiguous);
@@ -1497,10 +1513,13 @@ fn diagnose_split(
         });
     }
     // Never silent on an offset the records cannot see: with a table named, no offset named
-    // or reported, and no rest at 0 V in any record (the one reading that is the sensor's
-    // zero, above), a sensor offset is a constant the table's relays the records never
-    // switch, and its start memory, take up unseen. Say so, with what an offset fitted beside
-    // the table comes to.
+    // or reported, no record that starts at rest at 0 V (the reading that is the sensor's
+    // zero, above) and none that goes down to the table's low end (where every relay is off
+    // and the table reads nothing of its own), a sensor offset is a constant that the table's
+    // relays the records never switch, and its start memory, take up as well. Said where an
+    // offset fitted beside the table leaves within CANNOT_TELL_RATIO of what the model leaves
+    // (the records do not pin it).
+    let table_low_v = slow_x.range().0;
     if named.iter().any(|n| n == "hysteresis")
         && !named.iter().any(|n| n == "offset")
         && !catalogue::present(&model, "offset")
@@ -1510,8 +1529,12 @@ fn diagnose_split(
         && signatures::compute(data, &sims, &noise)
             .rest_zero_v
             .is_none()
+        && data
+            .iter()
+            .all(|d| min_max(&d.u_v).0 > table_low_v + REST_ZERO_INPUT_V)
         && let Some(with) = refit_slow(&model, &["offset"], data, &slow_x, u_range)
         && let Ok((_, mse_with)) = simulate_all(&with, data)
+        && leave_within(&mse_with, &cur_mse, &var, CANNOT_TELL_RATIO)
     {
         let fitted_v = with.offset.as_ref().map_or(0.0, |o| o.offset_v);
         cannot_tell.push(CannotTell {
@@ -1521,11 +1544,12 @@ fn diagnose_split(
             rms_v: rms_of(&cur_mse),
             alternative_rms_v: rms_of(&mse_with),
             why: format!(
-                "no record rests at 0 V input, where the sensor's reading is its zero: a sensor \
-                 offset is a constant that the table's relays these records never switch, and \
-                 its start memory, hold as well, and the records do not pin it (an offset fitted \
-                 beside the table comes to {:.1} mV and leaves {:.2} mV against {:.2} mV); a rest at 0 V before the \
-                 records (the recommended protocol) tells them apart",
+                "{STANDING_OFFSET_NOTE}: a sensor offset is a constant that the table's relays \
+                 these records never switch, and its start memory, hold too, and the records \
+                 do not pin it (an offset fitted beside the table comes to {:.1} mV and leaves \
+                 {:.2} mV against {:.2} mV); a rest at 0 V at a record's start (the recommended \
+                 protocol), or records that go down to the bottom of the range, tell a sensor \
+                 offset from it",
                 1e3 * fitted_v,
                 1e3 * rms_of(&mse_with),
                 1e3 * rms_of(&cur_mse)

@@ -11,7 +11,10 @@
 //!   mean-square residual, and whether the residual differs between rising and falling input
 //!   there (a loop the model lacks);
 //! * **in frequency**: the strongest line of the residual's amplitude spectrum (one Hann
-//!   window over up to 2^16 samples) and the share of the residual power within 10 % of it.
+//!   window over up to 2^16 samples) and the share of the residual power within 10 % of it,
+//!   with what drives it where the input has no power there ([`UNDRIVEN_SHARE`]): a harmonic
+//!   of the input's own line, or a line the input does not drive, on a mains frequency
+//!   (interference in the measurement?) or not.
 //!
 //! `rms_v` is the residual RMS with the noise floor taken out in quadrature, the root of the
 //! mean over records of `max(MSE_r - floor_r^2, 0)`: the part a model could still explain.
@@ -132,37 +135,81 @@ pub const UNDRIVEN_SHARE: f64 = 1e-6;
 /// assumption: a static shape or a loop bends a sine into its first few harmonics).
 pub const HARMONIC_MAX: f64 = 20.0;
 
-/// Mains frequencies, Hz, and the harmonics of them named as such.
-const MAINS_HZ: [f64; 2] = [50.0, 60.0];
-const MAINS_HARMONICS: usize = 5;
+/// Spectrum bins either side of a line that count as the line (a Hann window spreads a line
+/// over about two bins either side of its centre).
+pub const LINE_BINS: f64 = 2.0;
 
-/// What drives the residual's line at `f` Hz (spectrum bin width `df`), in words, or nothing
-/// where the input has power there: a harmonic of the input's own strongest line, or a line
-/// the input does not drive, at a mains frequency or not. A line the input does not drive is
-/// no effect of the stage's that the catalogue could add: interference in the measurement is
-/// the first thing to check on a real record.
+/// Input cycles a record must hold, at its strongest line, for a residual line to be called a
+/// harmonic of it (our assumption: with fewer, the harmonics lie within a few bins of each
+/// other and every low line would be one).
+pub const HARMONIC_MIN_CYCLES: f64 = 5.0;
+
+/// Mains frequencies, Hz (the 50 and 60 Hz grids).
+pub const MAINS_HZ: [f64; 2] = [50.0, 60.0];
+/// Harmonics of the mains named as such (our assumption: a rectifier's hum is mostly the
+/// first few).
+pub const MAINS_HARMONICS: usize = 5;
+/// How far from its nominal a mains line may sit, as a share of its frequency (our
+/// assumption: a grid holds its frequency within about 1 %, and a line's own spread in a
+/// Hann window adds as much); a spectrum coarser than this window names no mains line.
+pub const MAINS_TOL_SHARE: f64 = 0.02;
+
+/// The input's strongest line, Hz, refined between its bins: the peak of a parabola through
+/// the log magnitudes of the largest bin and its neighbours (a Hann window's line is close
+/// to a Gaussian in log magnitude, so the refined centre is within a small part of a bin).
+fn strongest_line_hz(input: &[(f64, f64)], df: f64) -> f64 {
+    let Some(k) = (0..input.len()).max_by(|&a, &b| input[a].1.total_cmp(&input[b].1)) else {
+        return 0.0;
+    };
+    if k == 0 || k + 1 >= input.len() {
+        return input[k].0;
+    }
+    let l = |j: usize| input[j].1.max(1e-300).ln();
+    let (a, b, c) = (l(k - 1), l(k), l(k + 1));
+    let den = a - 2.0 * b + c;
+    let delta = if den < 0.0 {
+        (0.5 * (a - c) / den).clamp(-0.5, 0.5)
+    } else {
+        0.0
+    };
+    input[k].0 + delta * df
+}
+
+/// What drives the residual's line at `f` Hz (spectrum bin width `df`; `input` the input's
+/// power spectrum on the same bins), in words, or nothing where the input has power there: a
+/// harmonic of the input's own strongest line (where the record holds
+/// [`HARMONIC_MIN_CYCLES`] of it; the tolerance grows with the harmonic's number, as the
+/// refined line's error does), or a line the input does not drive, at a mains frequency or
+/// not. A line the input does not drive is no effect of the stage's that the catalogue could
+/// add: interference in the measurement is the first thing to check on a real record.
 fn drive(f: f64, df: f64, input: &[(f64, f64)]) -> String {
     let total: f64 = input.iter().map(|b| b.1).sum::<f64>();
-    if total <= 0.0 || f <= 0.0 {
+    if total <= 0.0 || f <= 0.0 || df <= 0.0 {
         return String::new();
     }
-    let near = |g: f64| (g - f).abs() <= 2.0 * df;
-    let at: f64 = input.iter().filter(|b| near(b.0)).map(|b| b.1).sum();
+    let at: f64 = input
+        .iter()
+        .filter(|b| (b.0 - f).abs() <= LINE_BINS * df)
+        .map(|b| b.1)
+        .sum();
     if at > UNDRIVEN_SHARE * total {
         return String::new();
     }
-    let f0 = input
-        .iter()
-        .fold((0.0, 0.0), |a, b| if b.1 > a.1 { *b } else { a })
-        .0;
-    let k = (f / f0.max(1e-12)).round();
-    if f0 > 0.0 && (1.0..=HARMONIC_MAX).contains(&k) && (f - k * f0).abs() <= 2.0 * df {
-        return format!(" (harmonic {k:.0} of the input's {f0:.3} Hz)");
+    let f0 = strongest_line_hz(input, df);
+    if f0 >= HARMONIC_MIN_CYCLES * df {
+        let k = (f / f0).round();
+        let tol = (df * (LINE_BINS + 0.5 * k)).min(0.25 * f0);
+        if (1.0..=HARMONIC_MAX).contains(&k) && (f - k * f0).abs() <= tol {
+            return format!(" (harmonic {k:.0} of the input's {f0:.3} Hz)");
+        }
     }
     let mains = MAINS_HZ
         .iter()
         .flat_map(|m| (1..=MAINS_HARMONICS).map(move |h| m * h as f64))
-        .any(|m| (m - f).abs() <= 2.0 * df);
+        .any(|m| {
+            let window = MAINS_TOL_SHARE * m;
+            LINE_BINS * df <= window && (m - f).abs() <= window
+        });
     if mains {
         " (the input does not drive it and it sits on a mains frequency: interference in the \
          measurement rather than the stage?)"
@@ -173,9 +220,10 @@ fn drive(f: f64, df: f64, input: &[(f64, f64)]) -> String {
 }
 
 /// The strongest line of `r`'s spectrum and its share of the power, in words: one Hann
-/// segment over the record (at most 2^16 samples), the line test's own spectrum routine.
+/// segment over the record (at most 2^16 samples), the line test's own spectrum routine;
+/// with what drives the line, from the input `u`'s spectrum on the same samples ([`drive`]).
 fn line(r: &[f64], u: &[f64], t: f64) -> String {
-    let n = r.len().min(1 << 16);
+    let n = r.len().min(u.len()).min(1 << 16);
     if n < 64 {
         return "too short for a spectrum".into();
     }
@@ -218,12 +266,17 @@ mod tests {
     /// model that follows it exactly, and records with a 3 mV line at `line_hz` added: the
     /// words on the residual's line.
     fn words(line_hz: f64, extra_hz: Option<f64>) -> String {
-        let n = 50_000;
+        words_at(1.0, 10.0, line_hz, extra_hz)
+    }
+
+    /// As [`words`], with an input sine of `f0_hz` over `seconds`.
+    fn words_at(f0_hz: f64, seconds: f64, line_hz: f64, extra_hz: Option<f64>) -> String {
+        let n = (5_000.0 * seconds) as usize;
         let t: Vec<f64> = (0..n).map(|i| i as f64 / 5_000.0).collect();
         let w = |f: f64, x: f64| (2.0 * std::f64::consts::PI * f * x).sin();
         let u: Vec<f64> = t
             .iter()
-            .map(|&x| 5.0 + 4.0 * w(1.0, x) + extra_hz.map_or(0.0, |f| 0.2 * w(f, x)))
+            .map(|&x| 5.0 + 4.0 * w(f0_hz, x) + extra_hz.map_or(0.0, |f| 0.2 * w(f, x)))
             .collect();
         let sim = u.clone();
         let y: Vec<f64> = u
@@ -259,6 +312,28 @@ mod tests {
         assert!(
             !driven.contains("drive") && !driven.contains("harmonic"),
             "{driven}"
+        );
+        // An input between the spectrum's bins (1.03 Hz on 0.1 Hz bins): its 7th harmonic
+        // (7.21 Hz, three bins from 7 times the raw peak) is still one, and a line between
+        // harmonics (7.7 Hz) is not.
+        let off_bin = words_at(1.03, 10.0, 7.21, None);
+        assert!(
+            off_bin.contains("(harmonic 7 of the input's 1.03"),
+            "{off_bin}"
+        );
+        let between = words_at(1.03, 10.0, 7.7, None);
+        assert!(
+            between.contains("Hz (the input does not drive it) ("),
+            "{between}"
+        );
+        // Four input cycles (0.2 Hz over 20 s): too few to call a low line a harmonic.
+        let few = words_at(0.2, 20.0, 0.9, None);
+        assert!(!few.contains("harmonic"), "{few}");
+        // A 0.2 s record's 5 Hz bins are coarser than the mains window at 50 Hz (1 Hz).
+        let coarse = words_at(10.0, 0.2, 50.0, None);
+        assert!(
+            coarse.contains("Hz (the input does not drive it) ("),
+            "{coarse}"
         );
     }
 }
