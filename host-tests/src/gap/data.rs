@@ -9,7 +9,8 @@
 //! count.
 
 use super::constants::{
-    FAST_RATE_HZ, HOLD_BAND_SIGMAS, JUMP_MIN_V, JUMP_RATIO, MIN_SAMPLES, REVERSAL_MIN_V,
+    FAST_RATE_HZ, HOLD_BAND_SIGMAS, JUMP_MIN_V, JUMP_RATIO, MIN_SAMPLES, REST_ZERO_INPUT_V,
+    REST_ZERO_MIN_S, REVERSAL_MIN_V,
 };
 use crate::io::csv::Record;
 use crate::io::model_file::ModelFile;
@@ -229,6 +230,18 @@ impl Data {
             }
         }
         out
+    }
+
+    /// Samples of the record's rest at 0 V input from its first sample: until the input first
+    /// leaves [`REST_ZERO_INPUT_V`] of 0 V, where that lasts [`REST_ZERO_MIN_S`] at least (the
+    /// one reading that is the sensor's zero: nothing but an offset moves the output there).
+    pub fn zero_rest_len(&self) -> Option<usize> {
+        let end = self
+            .u_v
+            .iter()
+            .position(|u| u.abs() > REST_ZERO_INPUT_V)
+            .unwrap_or(self.len());
+        (end as f64 * self.period_s() >= REST_ZERO_MIN_S).then_some(end)
     }
 
     /// Does the record have a hold ([`Self::holds`])?

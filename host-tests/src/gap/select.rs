@@ -1327,8 +1327,7 @@ fn diagnose_split(
                 // two (families case 1006: a curvature for its true scale, 8.26 against
                 // 10.54 mV, at 8x the floor).
                 let more_beside_loop = !any_hold
-                    && (named.iter().any(|n| n == "hysteresis")
-                        || catalogue::present(&model, "hysteresis"))
+                    && catalogue::present(&model, "hysteresis")
                     && STATIC_SHAPES.contains(&e.as_str())
                     && STATIC_SHAPES.contains(&f.as_str())
                     && catalogue::param_count(f) > catalogue::param_count(e);
@@ -1526,9 +1525,7 @@ fn diagnose_split(
         && !cannot_tell
             .iter()
             .any(|k| k.alternative == "offset" || k.named == "offset")
-        && signatures::compute(data, &sims, &noise)
-            .rest_zero_v
-            .is_none()
+        && data.iter().all(|d| d.zero_rest_len().is_none())
         && data
             .iter()
             .all(|d| min_max(&d.u_v).0 > table_low_v + REST_ZERO_INPUT_V)

@@ -29,8 +29,7 @@
 use super::constants::{HELD_LOOP_MIN_DIR_SHARE, HELD_LOOP_MIN_HOLDS, HELD_LOOP_MIN_S};
 use super::{
     DRIFT_TAIL_MIN_NOISE, Data, HYST_LOOP_MIN_NOISE, LINE_RATIO_MIN, MAX_MODE_DAMPING,
-    OFFSET_SHOWN_MIN, REST_ZERO_INPUT_V, REST_ZERO_MIN_S, REST_ZERO_SHOWN_MIN, REST_ZERO_SIGMAS,
-    catalogue,
+    OFFSET_SHOWN_MIN, REST_ZERO_SHOWN_MIN, REST_ZERO_SIGMAS, catalogue,
 };
 use crate::io::model_file::ModelFile;
 use model_core::params;
@@ -63,8 +62,7 @@ pub struct Signatures {
     pub level_v: f64,
     /// Slope of that line (a scale error of the monitor), fraction.
     pub scale: f64,
-    /// Over the records' first rest at 0 V input (from the first sample until the input first
-    /// leaves [`REST_ZERO_INPUT_V`] of 0 V, where that lasts [`REST_ZERO_MIN_S`]): the
+    /// Over the records' first rest at 0 V input ([`Data::zero_rest_len`]): the
     /// residual's mean,
     /// the measured output's mean and the standard error of a mean there, volts; `None` where
     /// no record starts so.
@@ -155,13 +153,7 @@ pub fn compute(data: &[Data], sims: &[Vec<f64>], noise: &[f64]) -> Signatures {
         let r: Vec<f64> = d.y_v.iter().zip(y).map(|(a, b)| a - b).collect();
         // Until the input first leaves 0 V (the output cannot move before it), if that is
         // long enough to be a rest.
-        let end = d
-            .u_v
-            .iter()
-            .position(|u| u.abs() > REST_ZERO_INPUT_V)
-            .unwrap_or(d.len())
-            .min(r.len());
-        if end as f64 * d.period_s() >= REST_ZERO_MIN_S {
+        if let Some(end) = d.zero_rest_len().map(|e| e.min(r.len())) {
             rest_sum += r[..end].iter().sum::<f64>();
             rest_y += d.y_v[..end].iter().sum::<f64>();
             rest_n += end;

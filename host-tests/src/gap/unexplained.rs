@@ -248,7 +248,8 @@ fn line(r: &[f64], u: &[f64], t: f64) -> String {
         .into_iter()
         .map(|(f, a)| (f, a * a))
         .collect();
-    let df = if p.len() > 1 { p[1].0 - p[0].0 } else { f };
+    // (the spectrum's bin width: one segment of `n` samples)
+    let df = 1.0 / (n as f64 * t);
     format!(
         "strongest residual frequency {f:.3} Hz{} ({:.0} % of the varying power within 10 % of it); mean {:.2} mV ({dc_share:.0} % of the power)",
         drive(f, df, &input),
