@@ -165,6 +165,27 @@ pub const CREEP_START_SHARE: f64 = 0.1;
 /// smaller one to within the noise of a single sample).
 pub const CREEP_START_MIN_FLOORS: f64 = 5.0;
 
+/// Longest stride, seconds, over which the noise floor looks for coloured noise to decorrelate
+/// ([`super::data::strided_floor`]; our assumption: a sensor or anti-alias filter of 300 Hz
+/// or more, whose noise decorrelates within three of its time constants, 1.6 ms at 300 Hz,
+/// and shows its plateau one doubling later; the thesis' E-509 has 10 kHz, sec. 2.4). Slower
+/// noise is not told from a slow effect.
+pub const NOISE_DECORRELATE_MAX_S: f64 = 4e-3;
+
+/// How much the noise estimate must grow from one stride to the next (twice as long) for the
+/// noise to count as still correlated ([`super::data::strided_floor`]; our assumption: on
+/// white noise two strides' estimates agree within 2 % over a thousand samples and within
+/// 0.5 % over 50 000, so a tenth is noise-proof; on first-order filtered noise the growth falls
+/// from 1.2-1.4 to below 1.1 within one doubling of the decorrelated stride, so the plateau's
+/// value is within a few per cent of the whole standard deviation).
+pub const NOISE_STRIDE_GROWTH: f64 = 1.1;
+
+/// The most of the noise estimate at a stride that the signal's own estimate there (the
+/// input's, scaled by the stage's gain) may be for the growth to count as the noise's
+/// ([`super::data::strided_floor`]; our assumption: a signal a quarter of the noise adds 3 %
+/// to it in quadrature, within the plateau's own tolerance).
+pub const NOISE_SIGNAL_SHARE: f64 = 0.25;
+
 /// Shortest run of constant input that counts as a hold, seconds (our assumption: long enough
 /// for a drift tail of 10-100 ms lags to show after the step's transient).
 pub const HOLD_MIN_S: f64 = 0.2;

@@ -527,9 +527,6 @@ pub fn diagnose(base: &ModelFile, data: &[Data], opts: &Options) -> anyhow::Resu
     } else {
         None
     };
-    let noise: Vec<f64> = data.iter().map(noise_floor).collect();
-    let var: Vec<f64> = noise.iter().map(|s| (s * s).max(1e-14)).collect();
-    let noise_floor_v = (var.iter().sum::<f64>() / var.len() as f64).sqrt();
     let (ulo, uhi) = data.iter().fold((0.0f64, 0.0f64), |(a, b), d| {
         let (l, h) = min_max(&d.u_v);
         (a.min(l), b.max(h))
@@ -539,6 +536,13 @@ pub fn diagnose(base: &ModelFile, data: &[Data], opts: &Options) -> anyhow::Resu
     let base_sims: Vec<Vec<f64>> = par_map(data, |d| sim(base, d))
         .into_iter()
         .collect::<anyhow::Result<_>>()?;
+    let noise: Vec<f64> = data
+        .iter()
+        .zip(&base_sims)
+        .map(|(d, s)| noise_floor(d, Some(s)))
+        .collect();
+    let var: Vec<f64> = noise.iter().map(|s| (s * s).max(1e-14)).collect();
+    let noise_floor_v = (var.iter().sum::<f64>() / var.len() as f64).sqrt();
     let base_sigs = signatures::compute(data, &base_sims, &noise);
     let rows = solve_rows(data, base, &noise)?;
     let slow_x = slow_regressors(data, rows, &[], base.plant.static_gain, CentreLine::Band);
