@@ -186,6 +186,17 @@ pub const NOISE_STRIDE_GROWTH: f64 = 1.1;
 /// to it in quadrature, within the plateau's own tolerance).
 pub const NOISE_SIGNAL_SHARE: f64 = 0.25;
 
+/// The finest resolution a record is taken to have, bits over its output's span (our
+/// assumption: the DS1103's ADC has 16 bits, and no lab record is finer; a record whose held
+/// levels never flip a code hides its step, and its floor is then the span's share,
+/// `super::data::output_step_v`).
+pub const RECORD_BITS_MAX: i32 = 16;
+
+/// The fewest distinct output values whose smallest gap is read as the record's converter step
+/// (`super::data::output_step_v`; our assumption: a 5-bit view of the span; held levels that
+/// never flip a code give as many values as levels, and their gaps are the levels').
+pub const STEP_MIN_VALUES: usize = 32;
+
 /// Shortest run of constant input that counts as a hold, seconds (our assumption: long enough
 /// for a drift tail of 10-100 ms lags to show after the step's transient).
 pub const HOLD_MIN_S: f64 = 0.2;

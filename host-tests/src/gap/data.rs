@@ -13,7 +13,8 @@
 
 use super::constants::{
     FAST_RATE_HZ, HOLD_BAND_SIGMAS, JUMP_MIN_V, JUMP_RATIO, MIN_SAMPLES, NOISE_DECORRELATE_MAX_S,
-    NOISE_SIGNAL_SHARE, NOISE_STRIDE_GROWTH, REST_ZERO_INPUT_V, REST_ZERO_MIN_S, REVERSAL_MIN_V,
+    NOISE_SIGNAL_SHARE, NOISE_STRIDE_GROWTH, RECORD_BITS_MAX, REST_ZERO_INPUT_V, REST_ZERO_MIN_S,
+    REVERSAL_MIN_V, STEP_MIN_VALUES,
 };
 use crate::io::csv::Record;
 use crate::io::model_file::ModelFile;
@@ -281,17 +282,125 @@ pub fn mse(a: &[f64], b: &[f64]) -> f64 {
 /// `model_y` is a model's noise-free output on the record (the base model's): what it moves
 /// fast is signal, not noise (without it, any growth with the stride counts as the noise's).
 pub fn noise_floor(d: &Data, model_y: Option<&[f64]>) -> f64 {
-    let max_stride = ((NOISE_DECORRELATE_MAX_S / d.period_s()).floor() as usize).max(1);
-    let f = floor_within(d, model_y, max_stride);
-    if std::env::var("NOISE_DEBUG").is_ok() {
-        eprintln!("NOISEDBG {} {:.4} -> {:.4} mV", d.name, 1e3 * floor_within(d, model_y, 1), 1e3 * f);
-    }
-    f
+    noise_floor_of(d, model_y).sigma_v
 }
 
-/// [`noise_floor`] with strides of at most `max_stride` samples (1: the stride-1 estimate).
+/// A record's noise floor and how it was found ([`noise_floor_of`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct NoiseFloor {
+    /// The floor, volts.
+    pub sigma_v: f64,
+    /// The estimate from neighbouring samples, volts (the floor where the noise is white).
+    pub close_v: f64,
+    /// Where the noise is coloured: the samples' spacing, seconds, at which it decorrelated.
+    pub decorrelated_s: Option<f64>,
+    /// The record's resolution: its output's smallest step, volts ([`output_step_v`]).
+    pub step_v: f64,
+    /// Whether the output showed that step (else it is the span's `RECORD_BITS_MAX`-bit
+    /// share).
+    pub step_seen: bool,
+    /// Whether the floor is the resolution's (`step_v / sqrt(12)`), above what the
+    /// differences give.
+    pub by_resolution: bool,
+}
+
+impl NoiseFloor {
+    /// Words for the table where the noise is coloured or below the record's resolution.
+    pub fn note(&self, name: &str) -> Option<String> {
+        if self.by_resolution && !self.step_seen {
+            return Some(format!(
+                "{name}: neighbouring samples do not differ ({:.3} mV of noise) and the output \
+                 takes too few values to show its converter's step: the floor is the rounding \
+                 of {RECORD_BITS_MAX} bits over its span, {:.3} mV",
+                1e3 * self.close_v,
+                1e3 * self.sigma_v
+            ));
+        }
+        if self.by_resolution {
+            return Some(format!(
+                "{name}: the output moves in steps of {:.3} mV, and neighbouring samples differ \
+                 by less than that ({:.3} mV of noise): the floor is the steps' own rounding, \
+                 {:.3} mV (step / sqrt 12)",
+                1e3 * self.step_v,
+                1e3 * self.close_v,
+                1e3 * self.sigma_v
+            ));
+        }
+        self.decorrelated_s.map(|s| {
+            format!(
+                "{name}: the noise is coloured (a sensor or filter bandwidth below the record's \
+                 Nyquist rate): neighbouring samples give {:.2} mV, samples {:.3} ms apart \
+                 {:.2} mV, which is the floor",
+                1e3 * self.close_v,
+                1e3 * s,
+                1e3 * self.sigma_v
+            )
+        })
+    }
+}
+
+/// [`noise_floor`] with how it was found.
+pub fn noise_floor_of(d: &Data, model_y: Option<&[f64]>) -> NoiseFloor {
+    let max_stride = ((NOISE_DECORRELATE_MAX_S / d.period_s()).floor() as usize).max(1);
+    let (step_v, step_seen) = output_step_v(&d.y_v);
+    let rounding_v = step_v / 12f64.sqrt();
+    let close_v = floor_within(d, model_y, 1).0;
+    if close_v < rounding_v {
+        // (noise below the record's steps: the differences see the steps, not the noise,
+        // and the strides' growth is the signal crossing them)
+        return NoiseFloor {
+            sigma_v: rounding_v,
+            close_v,
+            decorrelated_s: None,
+            step_v,
+            step_seen,
+            by_resolution: true,
+        };
+    }
+    let (noise_v, stride) = floor_within(d, model_y, max_stride);
+    NoiseFloor {
+        sigma_v: noise_v,
+        close_v,
+        decorrelated_s: (stride > 1).then(|| stride as f64 * d.period_s()),
+        step_v,
+        step_seen,
+        by_resolution: false,
+    }
+}
+
+/// The record's resolution, volts: the smallest gap between two of its output's distinct
+/// values, and at least its output's span over `2^RECORD_BITS_MAX`. A record rounded by its
+/// converter (a scope's 8 or 12 bits, a 16-bit ADC) takes whole steps, and where its noise is
+/// below one step, held samples read the same value, the differences' median is zero, and the
+/// floor is the rounding's own `step / sqrt(12)` (a model cannot come nearer the record than
+/// that on average). An unrounded record's smallest gap is negligible. Gaps below a millionth
+/// of the span are the decimal text's, not a converter's. An output of fewer than
+/// `STEP_MIN_VALUES` distinct values (held levels that never flip a code) hides the step:
+/// there the span's share stands in for it.
+/// Returns the step and whether the output showed it.
+pub fn output_step_v(y: &[f64]) -> (f64, bool) {
+    let (lo, hi) = min_max(y);
+    let span = (hi - lo).max(0.0);
+    let tiny = 1e-6 * span.max(1e-3);
+    let mut v: Vec<f64> = y.iter().copied().filter(|x| x.is_finite()).collect();
+    v.sort_by(f64::total_cmp);
+    let gaps: Vec<f64> = v
+        .windows(2)
+        .map(|w| w[1] - w[0])
+        .filter(|&s| s > tiny)
+        .collect();
+    let finest = span / 2f64.powi(RECORD_BITS_MAX);
+    if gaps.len() + 1 < STEP_MIN_VALUES {
+        return (finest, false);
+    }
+    let gap = gaps.into_iter().fold(span, f64::min);
+    (gap.max(finest), gap >= finest)
+}
+
+/// [`noise_floor`] with strides of at most `max_stride` samples (1: the stride-1 estimate),
+/// and the stride it was read at.
 #[allow(clippy::needless_range_loop)] // several arrays indexed together
-fn floor_within(d: &Data, model_y: Option<&[f64]>, max_stride: usize) -> f64 {
+fn floor_within(d: &Data, model_y: Option<&[f64]>, max_stride: usize) -> (f64, usize) {
     let n = d.len();
     let settle = (0.01 / d.period_s()).ceil() as usize;
     let mut since = vec![usize::MAX; n];
@@ -362,12 +471,13 @@ fn floor_within(d: &Data, model_y: Option<&[f64]>, max_stride: usize) -> f64 {
 /// the walk gives up (the stride-1 estimate is kept) at a stride where it is more than
 /// [`NOISE_SIGNAL_SHARE`] of the estimate, or where the estimate still grows at `max_stride`
 /// samples (a noise correlated for longer, or slow noise without a plateau, is left to the
-/// workflow's effects and its unexplained part).
+/// workflow's effects and its unexplained part). Returns the floor and the stride it was read
+/// at.
 pub fn strided_floor(
     estimate: impl Fn(usize) -> f64,
     signal: impl Fn(usize) -> f64,
     max_stride: usize,
-) -> f64 {
+) -> (f64, usize) {
     let first = estimate(1);
     let mut m = 1;
     let mut last = first;
@@ -377,7 +487,7 @@ pub fn strided_floor(
             break;
         }
         if next <= NOISE_STRIDE_GROWTH * last {
-            return if m == 1 { first } else { next };
+            return if m == 1 { (first, 1) } else { (next, 2 * m) };
         }
         if signal(2 * m) > NOISE_SIGNAL_SHARE * next {
             break;
@@ -385,7 +495,7 @@ pub fn strided_floor(
         m *= 2;
         last = next;
     }
-    first
+    (first, 1)
 }
 
 /// The [`SimMemo`]'s key of `m`: its TOML text, but for the hysteresis table's values, which
@@ -530,7 +640,14 @@ mod tests {
             (50e3, 3e3, 2),
         ] {
             let (d, sd) = noisy_record(rate_hz, 2.0, corner_hz, order, sine);
-            let floor = noise_floor(&d, Some(&d.u_v));
+            let nf = noise_floor_of(&d, Some(&d.u_v));
+            let floor = nf.sigma_v;
+            // (the white records say nothing of colour; the filtered ones say where)
+            assert_eq!(
+                nf.decorrelated_s.is_some(),
+                order > 0,
+                "{rate_hz} Hz, {corner_hz} Hz"
+            );
             assert!(
                 (floor / sd - 1.0).abs() < 0.05,
                 "{rate_hz} Hz, {order} x {corner_hz} Hz: floor {:.3} mV against {:.3} mV",
@@ -547,22 +664,78 @@ mod tests {
     /// plateau where the signal is more than its share, gives the first back.
     #[test]
     fn a_signal_is_not_taken_for_coloured_noise() {
-        let chirp = |t: f64| {
-            5.0 - 4.0 * (2.0 * std::f64::consts::PI * (0.5 * t + 25.0 * t * t)).cos()
-        };
+        let chirp =
+            |t: f64| 5.0 - 4.0 * (2.0 * std::f64::consts::PI * (0.5 * t + 25.0 * t * t)).cos();
         let (d, _) = noisy_record(48e3, 3.0, 0.0, 0, chirp);
-        assert_eq!(noise_floor(&d, Some(&d.u_v)), floor_within(&d, None, 1));
+        assert_eq!(noise_floor(&d, Some(&d.u_v)), floor_within(&d, None, 1).0);
         let quiet = |_: usize| 0.0;
         let growing = |m: usize| 1e-3 * (m as f64).powi(2);
-        assert_eq!(strided_floor(growing, quiet, 64), 1e-3);
+        assert_eq!(strided_floor(growing, quiet, 64), (1e-3, 1));
         let plateau = |m: usize| 1e-3 * (1.0 - 0.8 / m as f64);
-        let p = strided_floor(plateau, quiet, 64);
+        let (p, _) = strided_floor(plateau, quiet, 64);
         assert!((p / 1e-3 - 1.0).abs() < 0.1 && p > plateau(1) * 1.5, "{p}");
         // (the same plateau, reached where the signal is a third of the estimate: not noise's)
         let moving = |m: usize| 1e-3 * m as f64 / 24.0;
-        assert_eq!(strided_floor(plateau, moving, 64), plateau(1));
+        assert_eq!(strided_floor(plateau, moving, 64), (plateau(1), 1));
         let white = |m: usize| 1e-3 * (1.0 + 0.01 * (m as f64).ln());
-        assert_eq!(strided_floor(white, quiet, 64), 1e-3);
+        assert_eq!(strided_floor(white, quiet, 64), (1e-3, 1));
+    }
+
+    /// A slow ramp rounded to 2 mV steps (a 12-bit scope over 8 V) with 0.05 mV of noise: a
+    /// code lasts five samples, the differences' median is zero, and the floor is the
+    /// rounding's `2 mV / sqrt(12)` = 0.577 mV, said so. A 1 Hz sine rounded so with 0.2 mV of
+    /// noise changes code often enough for the differences to see the rounding as noise:
+    /// between the rounding's share and the two together. Unrounded, a record's floor is its
+    /// noise. Four held levels and nothing else hide their step: the span's 16-bit share
+    /// stands in for it.
+    #[test]
+    fn a_rounded_record_has_its_resolution_as_floor() {
+        let round = |d: &Data, noise_share: f64| {
+            let mut r = d.clone();
+            for (y, u) in r.y_v.iter_mut().zip(&d.u_v) {
+                let w = *y - u;
+                *y = ((u + noise_share * w) / 2e-3).round() * 2e-3;
+            }
+            r
+        };
+        let rounding_v = 2e-3 / 12f64.sqrt();
+        let ramp = |t: f64| 1.0 + 0.36 * t;
+        let (d, _) = noisy_record(5e3, 20.0, 0.0, 0, ramp);
+        let nf = noise_floor_of(&round(&d, 0.05), None);
+        assert!(
+            nf.by_resolution && nf.step_seen && (nf.step_v - 2e-3).abs() < 1e-9,
+            "{nf:?}"
+        );
+        assert!((nf.sigma_v - rounding_v).abs() < 1e-9, "{nf:?}");
+        assert!(
+            nf.note("r")
+                .is_some_and(|n| n.contains("steps of 2.000 mV"))
+        );
+        let sine = |t: f64| 5.0 - 4.5 * (2.0 * std::f64::consts::PI * t).cos();
+        let (d, _) = noisy_record(5e3, 2.0, 0.0, 0, sine);
+        let nf = noise_floor_of(&round(&d, 0.2), None);
+        let both_v = (rounding_v.powi(2) + 0.2e-3f64.powi(2)).sqrt();
+        assert!(
+            nf.sigma_v >= rounding_v && nf.sigma_v <= 1.15 * both_v,
+            "{nf:?}"
+        );
+        let white = noise_floor_of(&d, None);
+        let (lo, hi) = min_max(&d.y_v);
+        assert!(
+            !white.by_resolution && white.step_v <= (hi - lo) / 65536.0 * (1.0 + 1e-9),
+            "{white:?}"
+        );
+        assert!((white.sigma_v / 1e-3 - 1.0).abs() < 0.05, "{white:?}");
+        assert!(white.note("w").is_none());
+        let levels = |t: f64| [2.0, 6.3, 4.1, 8.7][((t * 2.0) as usize).min(3)];
+        let (mut held, _) = noisy_record(5e3, 2.0, 0.0, 0, levels);
+        held.y_v.clone_from(&held.u_v);
+        let nf = noise_floor_of(&held, None);
+        assert!(
+            nf.by_resolution && !nf.step_seen && (nf.step_v - 6.7 / 65536.0).abs() < 1e-12,
+            "{nf:?}"
+        );
+        assert!(nf.note("h").is_some_and(|n| n.contains("too few values")));
     }
 
     /// A memo hit is the simulation itself; a changed model or a changed input is simulated

@@ -100,6 +100,9 @@ impl Diagnosis {
             1e3 * self.final_rms_v,
             self.final_rms_v / self.noise_floor_v.max(1e-12)
         ));
+        for n in &self.noise_notes {
+            s.push_str(&format!("noise: {n}\n"));
+        }
         for c in &self.cannot_tell {
             s.push_str(&format!(
                 "cannot tell {} from {}: {}\n",
@@ -278,6 +281,9 @@ pub fn write(dir: &Path, base: &ModelFile, data: &[Data], d: &Diagnosis) -> anyh
         1e3 * d.steps.first().map_or(d.final_rms_v, |s| s.rms_before_v),
         1e3 * d.final_rms_v
     );
+    for n in &d.noise_notes {
+        let _ = write!(h, "<p>Noise: {}.</p>", esc(n));
+    }
     h.push_str("<h2>Steps</h2><table><tr><th>step</th><th>effect</th><th>evidence</th><th>parameters</th><th>RMS before</th><th>RMS after</th></tr>");
     for (i, s) in d.steps.iter().enumerate() {
         let p: Vec<String> = s.params.iter().map(|(k, v)| format!("{k} = {v}")).collect();

@@ -16,7 +16,7 @@ use super::constants::{
     PRUNE_PER_PARAM, PRUNE_RATIO, REST_ZERO_INPUT_V, REST_ZERO_SHOWN_MIN, REST_ZERO_SIGMAS,
     RISE_CHOICE_RATIO, STATIC_TELL_RATIO, STOP_FLOOR_RATIO, STRUCTURE_ROUNDS,
 };
-use super::data::{Data, min_max, mse, noise_floor, sim, simulate_all};
+use super::data::{Data, NoiseFloor, min_max, mse, noise_floor_of, sim, simulate_all};
 use super::everett::CentreLine;
 use super::fast_fit::fit_fast;
 use super::signatures::{self, shows_share};
@@ -93,6 +93,9 @@ pub struct Diagnosis {
     pub steps: Vec<Step>,
     /// Noise floor of each record, volts.
     pub record_noise_v: Vec<f64>,
+    /// For each record whose noise is coloured, how its floor was found
+    /// ([`super::data::NoiseFloor::note`]).
+    pub noise_notes: Vec<String>,
     /// Noise floor, volts (root of the mean of the records' variances).
     pub noise_floor_v: f64,
     /// Residual RMS of the final model, volts.
@@ -210,6 +213,7 @@ impl Diagnosis {
                 "removed": s.removed,
             })).collect::<Vec<_>>(),
             "noise_floor_v": self.noise_floor_v,
+            "noise_notes": self.noise_notes,
             "final_rms_v": self.final_rms_v,
             "unexplained": self.unexplained,
             "cannot_tell": self.cannot_tell,
@@ -536,10 +540,16 @@ pub fn diagnose(base: &ModelFile, data: &[Data], opts: &Options) -> anyhow::Resu
     let base_sims: Vec<Vec<f64>> = par_map(data, |d| sim(base, d))
         .into_iter()
         .collect::<anyhow::Result<_>>()?;
-    let noise: Vec<f64> = data
+    let floors: Vec<NoiseFloor> = data
         .iter()
         .zip(&base_sims)
-        .map(|(d, s)| noise_floor(d, Some(s)))
+        .map(|(d, s)| noise_floor_of(d, Some(s)))
+        .collect();
+    let noise: Vec<f64> = floors.iter().map(|f| f.sigma_v).collect();
+    let noise_notes: Vec<String> = floors
+        .iter()
+        .zip(data)
+        .filter_map(|(f, d)| f.note(&d.name))
         .collect();
     let var: Vec<f64> = noise.iter().map(|s| (s * s).max(1e-14)).collect();
     let noise_floor_v = (var.iter().sum::<f64>() / var.len() as f64).sqrt();
@@ -552,6 +562,7 @@ pub fn diagnose(base: &ModelFile, data: &[Data], opts: &Options) -> anyhow::Resu
         data,
         bar: bar.as_ref(),
         noise,
+        noise_notes,
         var,
         noise_floor_v,
         u_range,
@@ -597,6 +608,7 @@ struct Setup<'a> {
     data: &'a [Data],
     bar: Option<&'a indicatif::ProgressBar>,
     noise: Vec<f64>,
+    noise_notes: Vec<String>,
     var: Vec<f64>,
     noise_floor_v: f64,
     u_range: (f64, f64),
@@ -1563,6 +1575,7 @@ fn diagnose_split(
         named,
         steps,
         record_noise_v: noise,
+        noise_notes: setup.noise_notes.clone(),
         noise_floor_v,
         final_rms_v,
         record_final_rms_v: cur_mse.iter().map(|m| m.sqrt()).collect(),
@@ -2112,6 +2125,7 @@ mod tests {
             named: named.iter().map(|e| e.to_string()).collect(),
             steps: Vec::new(),
             record_noise_v: vec![1e-3],
+            noise_notes: Vec::new(),
             noise_floor_v: 1e-3,
             final_rms_v: rms_v,
             record_final_rms_v: vec![rms_v],
