@@ -1489,3 +1489,34 @@ fn coloured_sensor_noise_is_the_floor_not_an_effect() {
     let fitted_v = d.model.offset.as_ref().map(|o| o.offset_v);
     assert_thesis_stage_with_offset_named("coloured noise", &d.named, ratio, fitted_v, offset_v);
 }
+
+/// A real record's glitches (three single samples 0.3-1.2 V off, as an ADC or a logger
+/// makes them) in a clean thesis-stage sine: nothing is named, the record ends at its floor
+/// (with them in, 6.8x the floor and an `unexplained` part), and the glitches are said.
+#[test]
+fn glitches_of_the_recording_are_replaced_and_said() {
+    let (t, u) = raised_cosine(5_000.0, 10.0, 1.0, 5.0, 4.5);
+    let mut truth = ModelFile::built_in("thesis-linear").unwrap();
+    truth.converters.noise_v = 1e-3;
+    truth.converters.seed = 31;
+    let stage = truth.build_stage().unwrap();
+    let mut y = simulate(&stage, truth.period_s, &t, &u);
+    for (i, v) in [(10_000usize, 0.5), (25_000, -0.8), (40_000, 1.2)] {
+        y[i] += v;
+    }
+    let data =
+        vec![Data::from_record("glitchy.csv", Record::new(t, u, Some(y), None).unwrap()).unwrap()];
+    let d = diagnose(&truth, &data, &Options::default()).unwrap();
+    let ratio = d.final_rms_v / d.noise_floor_v;
+    println!("{}", d.table());
+    assert!(d.named.is_empty(), "{:?}", d.named);
+    assert!(ratio <= 1.1, "final {ratio:.2}x the floor");
+    assert!(d.unexplained.is_none());
+    assert!(
+        d.noise_notes
+            .iter()
+            .any(|n| n.contains("3 single samples") && n.contains("t = 2.0000, 5.0000, 8.0000 s")),
+        "{:?}",
+        d.noise_notes
+    );
+}

@@ -197,6 +197,18 @@ pub const RECORD_BITS_MAX: i32 = 16;
 /// never flip a code give as many values as levels, and their gaps are the levels').
 pub const STEP_MIN_VALUES: usize = 32;
 
+/// How far off its neighbours' median, in noise floors, one output sample must be to count
+/// as a glitch of the recording (`super::data::glitches`; our assumption: Gaussian noise
+/// goes 10 sigma off with probability 1e-23, and a glitch that small moves a 50 000-sample
+/// record's RMS by a twentieth of a floor at most).
+pub const GLITCH_FLOORS: f64 = 10.0;
+
+/// How close to their own median, in noise floors, a glitch's four neighbours must stay
+/// (`super::data::glitches`; our assumption: four Gaussian samples stray 4 sigma from their
+/// median with probability about 3e-4, and an edge, a ringing mode or a sine that moves the
+/// output 10 floors in a sample spreads its neighbours further).
+pub const GLITCH_SPREAD_FLOORS: f64 = 4.0;
+
 /// Shortest run of constant input that counts as a hold, seconds (our assumption: long enough
 /// for a drift tail of 10-100 ms lags to show after the step's transient).
 pub const HOLD_MIN_S: f64 = 0.2;

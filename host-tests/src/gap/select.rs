@@ -16,7 +16,9 @@ use super::constants::{
     PRUNE_PER_PARAM, PRUNE_RATIO, REST_ZERO_INPUT_V, REST_ZERO_SHOWN_MIN, REST_ZERO_SIGMAS,
     RISE_CHOICE_RATIO, STATIC_TELL_RATIO, STOP_FLOOR_RATIO, STRUCTURE_ROUNDS,
 };
-use super::data::{Data, NoiseFloor, min_max, mse, noise_floor_of, sim, simulate_all};
+use super::data::{
+    Data, NoiseFloor, min_max, mse, noise_floor_of, sim, simulate_all, without_glitches,
+};
 use super::everett::CentreLine;
 use super::fast_fit::fit_fast;
 use super::signatures::{self, shows_share};
@@ -93,8 +95,9 @@ pub struct Diagnosis {
     pub steps: Vec<Step>,
     /// Noise floor of each record, volts.
     pub record_noise_v: Vec<f64>,
-    /// For each record whose noise is coloured, how its floor was found
-    /// ([`super::data::NoiseFloor::note`]).
+    /// For each record whose noise is coloured or below its resolution, how its floor was
+    /// found ([`super::data::NoiseFloor::note`]), and each record's single-sample glitches,
+    /// replaced before the fits ([`super::data::without_glitches`]).
     pub noise_notes: Vec<String>,
     /// Noise floor, volts (root of the mean of the records' variances).
     pub noise_floor_v: f64,
@@ -553,6 +556,19 @@ pub fn diagnose(base: &ModelFile, data: &[Data], opts: &Options) -> anyhow::Resu
         .collect();
     let var: Vec<f64> = noise.iter().map(|s| (s * s).max(1e-14)).collect();
     let noise_floor_v = (var.iter().sum::<f64>() / var.len() as f64).sqrt();
+    // (single-sample glitches of the recording are replaced before anything is fitted, and
+    // said with the floors)
+    let mut noise_notes = noise_notes;
+    let cleaned: Vec<Data> = data
+        .iter()
+        .zip(&noise)
+        .map(|(d, &f)| {
+            let (c, note) = without_glitches(d, f);
+            noise_notes.extend(note);
+            c
+        })
+        .collect();
+    let data: &[Data] = &cleaned;
     let base_sigs = signatures::compute(data, &base_sims, &noise);
     let rows = solve_rows(data, base, &noise)?;
     let slow_x = slow_regressors(data, rows, &[], base.plant.static_gain, CentreLine::Band);
