@@ -1520,3 +1520,46 @@ fn glitches_of_the_recording_are_replaced_and_said() {
         d.noise_notes
     );
 }
+
+/// Two slips a real record's maker makes, refused with words that say which: a time column
+/// in milliseconds (the record reads 1000 times slower than the 1 kHz the workflow needs, and
+/// the refusal names the rate it would have in seconds), and a sensor wired with its sign
+/// reversed (the output moves against the model's, correlation -1: named as such, not
+/// diagnosed as thousands of floors of unexplained residual as before).
+#[test]
+fn a_record_in_milliseconds_or_with_a_reversed_sign_is_refused_clearly() {
+    let (t, u) = raised_cosine(5_000.0, 2.0, 1.0, 5.0, 4.5);
+    let mut truth = ModelFile::built_in("thesis-linear").unwrap();
+    truth.converters.noise_v = 1e-3;
+    let stage = truth.build_stage().unwrap();
+    let y = simulate(&stage, truth.period_s, &t, &u);
+    let t_ms: Vec<f64> = t.iter().map(|x| 1e3 * x).collect();
+    let err = Data::from_record(
+        "ms.csv",
+        Record::new(t_ms, u.clone(), Some(y.clone()), None).unwrap(),
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(
+        err.contains("sampled at 5.0 Hz")
+            && err.contains("milliseconds")
+            && err.contains("5000.0 Hz"),
+        "{err}"
+    );
+    let reversed: Vec<f64> = y.iter().map(|v| -v).collect();
+    let data = vec![
+        Data::from_record(
+            "reversed.csv",
+            Record::new(t, u, Some(reversed), None).unwrap(),
+        )
+        .unwrap(),
+    ];
+    let err = diagnose(&truth, &data, &Options::default())
+        .err()
+        .map(|e| e.to_string())
+        .unwrap_or_default();
+    assert!(
+        err.contains("reversed.csv") && err.contains("moves against") && err.contains("-1.00"),
+        "{err}"
+    );
+}

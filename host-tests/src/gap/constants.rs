@@ -68,6 +68,20 @@ pub const MAX_STEPS: usize = 10;
 /// the issue's "never silent" bar of 2x the floor; below it, leaving the look-alikes unnamed
 /// costs little).
 pub const PAIR_FLOOR_RATIO: f64 = 2.0;
+/// A record whose output's correlation with the model's simulated output is below minus
+/// this is refused as one whose sensor's sign is reversed (our assumption: every catalogued
+/// effect keeps the output moving with the input, near +1, and a reversed sign gives -1; no
+/// record of the families or hidden-effect suites is refused).
+pub const REVERSED_CORRELATION: f64 = 0.5;
+/// ... where the model's output moves at least this many noise floors (standard deviation),
+/// so that a record whose input barely moves is not judged on its noise.
+pub const REVERSED_MIN_FLOORS: f64 = 10.0;
+
+/// Slowest sampling a record may have, Hz (issue #12: records of any rate from 1 kHz; slower,
+/// the stage's millisecond dynamics and its edges fall between samples, and the simulation's
+/// held input is a staircase the stage never saw). A record whose time column is in
+/// milliseconds reads 1000 times slower, and the refusal says so.
+pub const GAP_MIN_RATE_HZ: f64 = 1000.0;
 /// Fewest samples a record must have to show anything.
 pub const MIN_SAMPLES: usize = 200;
 /// Records at or above this rate are "fast" (edges resolved), volts... Hz.

@@ -12,9 +12,10 @@
 //! ([`strided_floor`]).
 
 use super::constants::{
-    FAST_RATE_HZ, GLITCH_FLOORS, GLITCH_SPREAD_FLOORS, HOLD_BAND_SIGMAS, JUMP_MIN_V, JUMP_RATIO,
-    MIN_SAMPLES, NOISE_DECORRELATE_MAX_S, NOISE_SIGNAL_SHARE, NOISE_STRIDE_GROWTH, RECORD_BITS_MAX,
-    REST_ZERO_INPUT_V, REST_ZERO_MIN_S, REVERSAL_MIN_V, STEP_MIN_VALUES,
+    FAST_RATE_HZ, GAP_MIN_RATE_HZ, GLITCH_FLOORS, GLITCH_SPREAD_FLOORS, HOLD_BAND_SIGMAS,
+    JUMP_MIN_V, JUMP_RATIO, MIN_SAMPLES, NOISE_DECORRELATE_MAX_S, NOISE_SIGNAL_SHARE,
+    NOISE_STRIDE_GROWTH, RECORD_BITS_MAX, REST_ZERO_INPUT_V, REST_ZERO_MIN_S, REVERSAL_MIN_V,
+    STEP_MIN_VALUES,
 };
 use crate::io::csv::Record;
 use crate::io::model_file::ModelFile;
@@ -132,6 +133,31 @@ impl Data {
         ensure!(
             n >= MIN_SAMPLES,
             "record {name}: {n} samples is too short to show anything (at least {MIN_SAMPLES} are needed)"
+        );
+        let rate_hz = rec.rate_hz();
+        let hz = |r: f64| {
+            if r >= 1.0 {
+                format!("{r:.1}")
+            } else {
+                format!("{r:.3e}")
+            }
+        };
+        ensure!(
+            rate_hz >= 0.99 * GAP_MIN_RATE_HZ,
+            "record {name}: sampled at {} Hz (t from {:.4} to {:.4} s over {n} samples); the model-gap \
+             workflow reads records sampled at {GAP_MIN_RATE_HZ} Hz or faster{}",
+            hz(rate_hz),
+            rec.t_s[0],
+            rec.t_s[n - 1],
+            if rate_hz * 1e3 >= GAP_MIN_RATE_HZ {
+                format!(
+                    ": is its time column in milliseconds? (in seconds the record would be \
+                     sampled at {} Hz)",
+                    hz(rate_hz * 1e3)
+                )
+            } else {
+                String::new()
+            }
         );
         let (lo, hi) = min_max(&rec.u_v);
         ensure!(
@@ -398,25 +424,28 @@ pub fn output_step_v(y: &[f64]) -> (f64, bool) {
 }
 
 /// Single-sample glitches of a record's output: samples at least `GLITCH_FLOORS` noise
-/// floors off the median of their four neighbours (two each side) while those neighbours stay
+/// floors off the median of their six neighbours (three each side) while those neighbours stay
 /// within `GLITCH_SPREAD_FLOORS` of it. No stage moves so: its dynamics take several samples
 /// to rise at any rate the workflow reads (an edge's step spreads its neighbours far apart, a
 /// ringing mode or a fast sine does too), so this is the recording's (an ADC's or a logger's
-/// glitch), and one such sample in 50 000 moves a record's RMS by up to several floors. Two
-/// glitches side by side spread each other's neighbours and are left. Returns each glitch's
-/// index and its neighbours' median.
+/// glitch), and one such sample in 50 000 moves a record's RMS by up to several floors. Three
+/// neighbours a side, not two: a stage ringing at a third of the sampling rate (families case
+/// 1032, 12 mV at 6.3 kHz sampled at 19 kHz) repeats each phase every third sample, and with
+/// two a side one phase's samples stood alone among the other two's. Two glitches side by side
+/// spread each other's neighbours and are left. Returns each glitch's index and its
+/// neighbours' median.
 pub fn glitches(d: &Data, floor_v: f64) -> Vec<(usize, f64)> {
     let y = &d.y_v;
     let n = y.len();
     let mut out = Vec::new();
-    if n < 5 || floor_v <= 0.0 || !floor_v.is_finite() {
+    if n < 7 || floor_v <= 0.0 || !floor_v.is_finite() {
         return out;
     }
-    for i in 2..n - 2 {
-        let mut nb = [y[i - 2], y[i - 1], y[i + 1], y[i + 2]];
+    for i in 3..n - 3 {
+        let mut nb = [y[i - 3], y[i - 2], y[i - 1], y[i + 1], y[i + 2], y[i + 3]];
         nb.sort_by(f64::total_cmp);
-        let med = 0.5 * (nb[1] + nb[2]);
-        let spread = (nb[3] - med).max(med - nb[0]);
+        let med = 0.5 * (nb[2] + nb[3]);
+        let spread = (nb[5] - med).max(med - nb[0]);
         if (y[i] - med).abs() > GLITCH_FLOORS * floor_v && spread <= GLITCH_SPREAD_FLOORS * floor_v
         {
             out.push((i, med));
@@ -814,7 +843,8 @@ mod tests {
     /// Three single-sample glitches (0.3 to 1.2 V) in a 1 Hz sine with 1 mV of noise are found
     /// where they are and replaced by their neighbours' median; none is found in the full
     /// thesis stage's own output (its resonance, slew limit and hysteresis) under random steps
-    /// every 5 ms at 50 kHz and under a fast sine near its resonance, with the same noise.
+    /// every 5 ms at 50 kHz and under a fast sine near its resonance, with the same noise, nor
+    /// in a mode ringing at a third of the sampling rate.
     #[test]
     fn single_sample_glitches_are_found_and_nothing_else() {
         let sine = |t: f64| 5.0 - 4.5 * (2.0 * std::f64::consts::PI * t).cos();
@@ -834,6 +864,16 @@ mod tests {
         let stage = ModelFile::built_in("thesis-full").unwrap();
         let steps = |t: f64| 5.0 + 4.0 * ((t * 200.0).floor() * 2.3999).sin();
         let fast = |t: f64| 5.0 + 0.5 * (2.0 * std::f64::consts::PI * 3000.0 * t).sin();
+        // (a mode ringing at a third of the sampling rate, 8 mV, on a held input)
+        let (mut d, sd) = noisy_record(18e3, 0.5, 0.0, 0, |t| 5.0 + t);
+        for (i, y) in d.y_v.iter_mut().enumerate() {
+            *y += 8e-3 * (2.0 * std::f64::consts::PI * i as f64 / 3.0).cos();
+        }
+        assert!(
+            glitches(&d, sd).is_empty(),
+            "a third: {:?}",
+            &glitches(&d, sd)[..1]
+        );
         for (name, u) in [("steps", &steps as &dyn Fn(f64) -> f64), ("fast", &fast)] {
             let (mut d, sd) = noisy_record(50e3, 0.5, 0.0, 0, u);
             let noise: Vec<f64> = d.y_v.iter().zip(&d.u_v).map(|(y, u)| y - u).collect();

@@ -14,7 +14,8 @@ use super::constants::{
     CANDIDATE_ROUNDS, CANNOT_TELL_RATIO, CREEP_START_MIN_FLOORS, CREEP_START_SHARE, HOLD_MIN_S,
     MAX_STEPS, MIN_EXPLAINED, OCCAM_SWAP_RATIO, PAIR_FLOOR_RATIO, PRUNE_KEEP_EXCESS_VAR,
     PRUNE_PER_PARAM, PRUNE_RATIO, REST_ZERO_INPUT_V, REST_ZERO_SHOWN_MIN, REST_ZERO_SIGMAS,
-    RISE_CHOICE_RATIO, STATIC_TELL_RATIO, STOP_FLOOR_RATIO, STRUCTURE_ROUNDS,
+    REVERSED_CORRELATION, REVERSED_MIN_FLOORS, RISE_CHOICE_RATIO, STATIC_TELL_RATIO,
+    STOP_FLOOR_RATIO, STRUCTURE_ROUNDS,
 };
 use super::data::{
     Data, NoiseFloor, min_max, mse, noise_floor_of, sim, simulate_all, without_glitches,
@@ -27,7 +28,7 @@ use super::start;
 use super::unexplained::{Unexplained, locate};
 use crate::io::model_file::ModelFile;
 use crate::util::{par_map, par_map_costliest_first};
-use anyhow::{Context, ensure};
+use anyhow::{Context, bail, ensure};
 
 /// One step of the workflow: the effect added or refitted.
 #[derive(Clone, Debug, serde::Serialize)]
@@ -512,6 +513,28 @@ struct Candidate {
     mse: Vec<f64>,
 }
 
+/// The correlation of a record's output `y` with the model's simulated output `sim`, where
+/// it is below `-REVERSED_CORRELATION` and the simulation moves more than
+/// `REVERSED_MIN_FLOORS` noise floors (`floor_v`, standard deviation): a record whose sensor's
+/// sign is reversed. `None` otherwise.
+fn moves_against(y: &[f64], sim: &[f64], floor_v: f64) -> Option<f64> {
+    let n = y.len().min(sim.len());
+    if n < 2 {
+        return None;
+    }
+    let my = y[..n].iter().sum::<f64>() / n as f64;
+    let ms = sim[..n].iter().sum::<f64>() / n as f64;
+    let (mut sxy, mut sxx, mut syy) = (0.0, 0.0, 0.0);
+    for (a, b) in y[..n].iter().zip(&sim[..n]) {
+        sxy += (a - my) * (b - ms);
+        syy += (a - my) * (a - my);
+        sxx += (b - ms) * (b - ms);
+    }
+    let moves = (sxx / n as f64).sqrt() > REVERSED_MIN_FLOORS * floor_v;
+    let c = sxy / (sxx * syy).sqrt().max(1e-300);
+    (moves && c < -REVERSED_CORRELATION).then_some(c)
+}
+
 /// Run the workflow from `base` on `data`.
 pub fn diagnose(base: &ModelFile, data: &[Data], opts: &Options) -> anyhow::Result<Diagnosis> {
     ensure!(!data.is_empty(), "no records given");
@@ -549,6 +572,17 @@ pub fn diagnose(base: &ModelFile, data: &[Data], opts: &Options) -> anyhow::Resu
         .map(|(d, s)| noise_floor_of(d, Some(s)))
         .collect();
     let noise: Vec<f64> = floors.iter().map(|f| f.sigma_v).collect();
+    for ((d, s), f) in data.iter().zip(&base_sims).zip(&noise) {
+        if let Some(c) = moves_against(&d.y_v, s, *f) {
+            bail!(
+                "record {}: its output moves against the model's (correlation {c:.2} between the \
+                 record's y and the model's simulated output): is the sensor's sign reversed, or \
+                 are u and y in each other's columns? The workflow names small departures from \
+                 the model, not a reversed sign",
+                d.name
+            );
+        }
+    }
     let noise_notes: Vec<String> = floors
         .iter()
         .zip(data)
