@@ -1521,11 +1521,12 @@ fn glitches_of_the_recording_are_replaced_and_said() {
     );
 }
 
-/// Two slips a real record's maker makes, refused with words that say which: a time column
+/// Three slips a real record's maker makes, refused with words that say which: a time column
 /// in milliseconds (the record reads 1000 times slower than the 1 kHz the workflow needs, and
-/// the refusal names the rate it would have in seconds), and a sensor wired with its sign
+/// the refusal names the rate it would have in seconds), a sensor wired with its sign
 /// reversed (the output moves against the model's, correlation -1: named as such, not
-/// diagnosed as thousands of floors of unexplained residual as before).
+/// diagnosed as thousands of floors of unexplained residual as before), and an output in
+/// millivolts (1000 times the model's: before, an error that a figure came out as NaN).
 #[test]
 fn a_record_in_milliseconds_or_with_a_reversed_sign_is_refused_clearly() {
     let (t, u) = raised_cosine(5_000.0, 2.0, 1.0, 5.0, 4.5);
@@ -1544,6 +1545,25 @@ fn a_record_in_milliseconds_or_with_a_reversed_sign_is_refused_clearly() {
         err.contains("sampled at 5.0 Hz")
             && err.contains("milliseconds")
             && err.contains("5000.0 Hz"),
+        "{err}"
+    );
+    let millivolts: Vec<f64> = y.iter().map(|v| 1e3 * v).collect();
+    let data = vec![
+        Data::from_record(
+            "mv.csv",
+            Record::new(t.clone(), u.clone(), Some(millivolts), None).unwrap(),
+        )
+        .unwrap(),
+    ];
+    let err = diagnose(&truth, &data, &Options::default())
+        .err()
+        .map(|e| e.to_string())
+        .unwrap_or_default();
+    assert!(
+        err.contains("mv.csv")
+            && err.contains("1000.0")
+            && err.contains("times as far")
+            && err.contains("mV"),
         "{err}"
     );
     let reversed: Vec<f64> = y.iter().map(|v| -v).collect();

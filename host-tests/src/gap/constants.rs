@@ -77,6 +77,13 @@ pub const REVERSED_CORRELATION: f64 = 0.5;
 /// so that a record whose input barely moves is not judged on its noise.
 pub const REVERSED_MIN_FLOORS: f64 = 10.0;
 
+/// A record whose output moves more than this many times as far as the model's simulated
+/// output, or less than its inverse (standard deviations), is refused as one in other units
+/// (our assumption: a calibration's scale error is a few per cent, the families suite's up to
+/// 5 %, and model-core's sensor takes a gain within 0.1-10; a factor of 5 is a unit slip:
+/// mV, um or nm for V).
+pub const SCALE_APART_MAX: f64 = 5.0;
+
 /// Slowest sampling a record may have, Hz (issue #12: records of any rate from 1 kHz; slower,
 /// the stage's millisecond dynamics and its edges fall between samples, and the simulation's
 /// held input is a staircase the stage never saw). A record whose time column is in

@@ -14,8 +14,8 @@ use super::constants::{
     CANDIDATE_ROUNDS, CANNOT_TELL_RATIO, CREEP_START_MIN_FLOORS, CREEP_START_SHARE, HOLD_MIN_S,
     MAX_STEPS, MIN_EXPLAINED, OCCAM_SWAP_RATIO, PAIR_FLOOR_RATIO, PRUNE_KEEP_EXCESS_VAR,
     PRUNE_PER_PARAM, PRUNE_RATIO, REST_ZERO_INPUT_V, REST_ZERO_SHOWN_MIN, REST_ZERO_SIGMAS,
-    REVERSED_CORRELATION, REVERSED_MIN_FLOORS, RISE_CHOICE_RATIO, STATIC_TELL_RATIO,
-    STOP_FLOOR_RATIO, STRUCTURE_ROUNDS,
+    REVERSED_CORRELATION, REVERSED_MIN_FLOORS, RISE_CHOICE_RATIO, SCALE_APART_MAX,
+    STATIC_TELL_RATIO, STOP_FLOOR_RATIO, STRUCTURE_ROUNDS,
 };
 use super::data::{
     Data, NoiseFloor, min_max, mse, noise_floor_of, sim, simulate_all, without_glitches,
@@ -518,6 +518,33 @@ struct Candidate {
 /// `REVERSED_MIN_FLOORS` noise floors (`floor_v`, standard deviation): a record whose sensor's
 /// sign is reversed. `None` otherwise.
 fn moves_against(y: &[f64], sim: &[f64], floor_v: f64) -> Option<f64> {
+    let (c, moves) = correlation(y, sim, floor_v)?;
+    (moves && c < -REVERSED_CORRELATION).then_some(c)
+}
+
+/// How many times as far a record's output `y` moves as the model's simulated output `sim`
+/// (standard deviations), where that is beyond `SCALE_APART_MAX` either way and the record
+/// moves more than `REVERSED_MIN_FLOORS` of its noise floors: a record in other units.
+/// `None` otherwise.
+fn scale_apart(y: &[f64], sim: &[f64], floor_v: f64) -> Option<f64> {
+    let n = y.len().min(sim.len());
+    let sd = |v: &[f64]| {
+        let m = v.iter().sum::<f64>() / v.len().max(1) as f64;
+        (v.iter().map(|x| (x - m) * (x - m)).sum::<f64>() / v.len().max(1) as f64).sqrt()
+    };
+    let (sy, ss) = (sd(&y[..n]), sd(&sim[..n]));
+    let k = sy / ss.max(1e-300);
+    // (the record's own floor is in the record's units: it is the record that must move)
+    (n >= 2
+        && ss > 0.0
+        && sy > REVERSED_MIN_FLOORS * floor_v
+        && !(1.0 / SCALE_APART_MAX..=SCALE_APART_MAX).contains(&k))
+    .then_some(k)
+}
+
+/// The correlation of `y` with `sim`, and whether `sim` moves more than `REVERSED_MIN_FLOORS`
+/// noise floors (standard deviation).
+fn correlation(y: &[f64], sim: &[f64], floor_v: f64) -> Option<(f64, bool)> {
     let n = y.len().min(sim.len());
     if n < 2 {
         return None;
@@ -531,8 +558,7 @@ fn moves_against(y: &[f64], sim: &[f64], floor_v: f64) -> Option<f64> {
         sxx += (b - ms) * (b - ms);
     }
     let moves = (sxx / n as f64).sqrt() > REVERSED_MIN_FLOORS * floor_v;
-    let c = sxy / (sxx * syy).sqrt().max(1e-300);
-    (moves && c < -REVERSED_CORRELATION).then_some(c)
+    Some((sxy / (sxx * syy).sqrt().max(1e-300), moves))
 }
 
 /// Run the workflow from `base` on `data`.
@@ -573,6 +599,27 @@ pub fn diagnose(base: &ModelFile, data: &[Data], opts: &Options) -> anyhow::Resu
         .collect();
     let noise: Vec<f64> = floors.iter().map(|f| f.sigma_v).collect();
     for ((d, s), f) in data.iter().zip(&base_sims).zip(&noise) {
+        if let Some(k) = scale_apart(&d.y_v, s, *f) {
+            let (ylo, yhi) = min_max(&d.y_v);
+            let (slo, shi) = min_max(s);
+            bail!(
+                "record {}: its output moves {} times as far as the model's (y spans {:.4} to \
+                 {:.4} V, the model's simulated output {:.4} to {:.4} V): is y in other units \
+                 (mV, um, nm), or is the model not this stage's? The workflow names small \
+                 departures from the model; a scale error within {SCALE_APART_MAX}x is its \
+                 `sensor-gain`",
+                d.name,
+                if k >= 1.0 {
+                    format!("{k:.3}")
+                } else {
+                    format!("{k:.3e}")
+                },
+                ylo,
+                yhi,
+                slo,
+                shi
+            );
+        }
         if let Some(c) = moves_against(&d.y_v, s, *f) {
             bail!(
                 "record {}: its output moves against the model's (correlation {c:.2} between the \
