@@ -1583,3 +1583,42 @@ fn a_record_in_milliseconds_or_with_a_reversed_sign_is_refused_clearly() {
         "{err}"
     );
 }
+
+/// A lab's own CSV header (`time_s;input_V;sensor_V`, semicolons) is read through `--vars`,
+/// and without it the refusal names the columns found and the flag; the same record diagnoses
+/// as under the house header.
+#[test]
+fn a_labs_own_column_names_are_read_through_vars() {
+    let (t, u) = raised_cosine(5_000.0, 2.0, 1.0, 5.0, 4.5);
+    let mut truth = ModelFile::built_in("thesis-linear").unwrap();
+    truth.converters.noise_v = 1e-3;
+    let stage = truth.build_stage().unwrap();
+    let y = simulate(&stage, truth.period_s, &t, &u);
+    let dir = std::env::temp_dir().join(format!("piezo-gap-vars-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let path = dir.join("lab.csv");
+    let mut text = String::from("time_s;input_V;sensor_V\n");
+    for i in 0..t.len() {
+        text.push_str(&format!("{};{};{}\n", t[i], u[i], y[i]));
+    }
+    std::fs::write(&path, text).unwrap();
+    let err = gap::load_data(std::slice::from_ref(&path), None)
+        .err()
+        .map(|e| format!("{e:#}"))
+        .unwrap_or_default();
+    assert!(
+        err.contains("no column `t`")
+            && err.contains("time_s,input_V,sensor_V")
+            && err.contains("--vars"),
+        "{err}"
+    );
+    let data = gap::load_data(
+        std::slice::from_ref(&path),
+        Some("t=time_s,u=input_V,y=sensor_V"),
+    )
+    .unwrap();
+    assert_eq!(data[0].y_v, y);
+    let d = diagnose(&truth, &data, &Options::default()).unwrap();
+    assert!(d.named.is_empty(), "{:?}", d.named);
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -159,6 +159,8 @@ fn simulate_on_samples_far_apart_is_refused_up_front() {
     );
 }
 
+/// Samples 10 s apart are refused up front by their rate (the workflow reads 1 kHz or
+/// faster); a 1 kHz record of 500 s, by the work it would take.
 #[test]
 fn gap_on_samples_far_apart_is_refused_up_front() {
     let d = dir("gapfar");
@@ -166,6 +168,12 @@ fn gap_on_samples_far_apart_is_refused_up_front() {
     write(&input, &csv(2000, 10.0, 5.0, 1.0));
     refused(
         &["gap", "--model", "thesis-linear", "--data", s(&input)],
+        "1000 Hz or faster",
+    );
+    let long = d.join("long.csv");
+    write(&long, &csv(500_000, 1e-3, 5.0, 1.0));
+    refused(
+        &["gap", "--model", "thesis-linear", "--data", s(&long)],
         "PIEZO_MAX_STEPS",
     );
 }

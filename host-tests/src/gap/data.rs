@@ -658,11 +658,15 @@ pub fn simulate_all(model: &ModelFile, data: &[Data]) -> anyhow::Result<(Vec<Vec
     Ok((sims, ms))
 }
 
-/// Read the records named on the command line: CSV or MATLAB v5 `.mat` (with `vars`).
+/// Read the records named on the command line: CSV or MATLAB v5 `.mat`, their time, input
+/// and output columns or variables named by `vars` (`t=NAME,u=NAME,y=NAME`, default `t`, `u`,
+/// `y`).
 pub fn load_data(paths: &[std::path::PathBuf], vars: Option<&str>) -> anyhow::Result<Vec<Data>> {
     if paths.is_empty() {
         bail!("no records: give at least one --data FILE");
     }
+    let names = crate::io::mat::parse_vars(vars.unwrap_or("t=t,u=u,y=y"))?;
+    let names = [names[0].as_str(), names[1].as_str(), names[2].as_str()];
     let mut out = Vec::new();
     for p in paths {
         let name = p.file_name().map_or_else(
@@ -673,7 +677,7 @@ pub fn load_data(paths: &[std::path::PathBuf], vars: Option<&str>) -> anyhow::Re
         let rec = if is_mat {
             crate::io::mat::read_record(p, vars.unwrap_or("t=t,u=u,y=y"))?
         } else {
-            Record::read(p).with_context(|| format!("record {}", p.display()))?
+            Record::read_named(p, names).with_context(|| format!("record {}", p.display()))?
         };
         if let Some(note) = rec.time_note(&name) {
             eprintln!("{note}");

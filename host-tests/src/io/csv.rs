@@ -119,12 +119,15 @@ pub enum RecordError {
     #[error("empty record: no header row (expected a line naming the columns, e.g. `t,u,y`)")]
     Empty,
     /// A required column is missing from the header.
-    #[error("line {line}: header has no column `{column}` (found: {found})")]
+    #[error(
+        "line {line}: header has no column `{column}` (found: {found}; name other columns with \
+         --vars t=NAME,u=NAME,y=NAME)"
+    )]
     MissingColumn {
         /// 1-based line of the header.
         line: usize,
         /// The missing column.
-        column: &'static str,
+        column: String,
         /// The columns found.
         found: String,
     },
@@ -422,6 +425,12 @@ impl Record {
 
     /// Parse CSV text (comma-, semicolon- or tab-separated: see [`separator`]).
     pub fn parse(text: &str) -> Result<Self, RecordError> {
+        Self::parse_named(text, ["t", "u", "y"])
+    }
+
+    /// [`Record::parse`] with the time, input and output columns named `names` (a lab's own
+    /// header: `time_s,input_V,sensor_V`); the reference column stays `r`.
+    pub fn parse_named(text: &str, names_wanted: [&str; 3]) -> Result<Self, RecordError> {
         // A byte-order mark (as some spreadsheet programs write) is not part of the header.
         let text = text.strip_prefix('\u{feff}').unwrap_or(text);
         let mut header: Option<(usize, Vec<String>)> = None;
@@ -456,15 +465,16 @@ impl Record {
                             });
                         }
                     }
-                    let find = |c: &'static str| names.iter().position(|n| n == c);
-                    let missing = |column| RecordError::MissingColumn {
+                    let wanted = names_wanted;
+                    let find = |c: &str| names.iter().position(|n| n == c);
+                    let missing = |column: &str| RecordError::MissingColumn {
                         line,
-                        column,
+                        column: column.to_string(),
                         found: truncate(&names.join(",")),
                     };
-                    it = find("t").ok_or_else(|| missing("t"))?;
-                    iu = find("u").ok_or_else(|| missing("u"))?;
-                    iy = find("y");
+                    it = find(wanted[0]).ok_or_else(|| missing(wanted[0]))?;
+                    iu = find(wanted[1]).ok_or_else(|| missing(wanted[1]))?;
+                    iy = find(wanted[2]);
                     ir = find("r");
                     header = Some((line, names));
                 }
@@ -532,8 +542,13 @@ impl Record {
 
     /// Parse bytes (refuses non-UTF-8 with the line it starts on).
     pub fn parse_bytes(bytes: &[u8]) -> Result<Self, RecordError> {
+        Self::parse_bytes_named(bytes, ["t", "u", "y"])
+    }
+
+    /// [`Record::parse_bytes`] with the columns named `names` ([`Record::parse_named`]).
+    pub fn parse_bytes_named(bytes: &[u8], names: [&str; 3]) -> Result<Self, RecordError> {
         match std::str::from_utf8(bytes) {
-            Ok(s) => Self::parse(s),
+            Ok(s) => Self::parse_named(s, names),
             Err(e) => {
                 let line = bytes[..e.valid_up_to()]
                     .iter()
@@ -547,11 +562,16 @@ impl Record {
 
     /// Read a CSV file.
     pub fn read(path: &Path) -> Result<Self, RecordError> {
+        Self::read_named(path, ["t", "u", "y"])
+    }
+
+    /// Read a CSV file whose columns are named `names` ([`Record::parse_named`]).
+    pub fn read_named(path: &Path, names: [&str; 3]) -> Result<Self, RecordError> {
         let bytes = std::fs::read(path).map_err(|e| RecordError::Io {
             path: path.display().to_string(),
             msg: e.to_string(),
         })?;
-        Self::parse_bytes(&bytes)
+        Self::parse_bytes_named(&bytes, names)
     }
 
     /// The CSV text: header `t,u[,y][,r]`, values in Rust's shortest round-trip form.

@@ -3,7 +3,8 @@
 //! the command line.
 //!
 //! Records are CSV ([`host_tests::io::csv`]) or MATLAB v5 `.mat` files
-//! ([`host_tests::io::mat`], variables named by `--vars`, default `t=t,u=u,y=y`). The table
+//! ([`host_tests::io::mat`]); `--vars` names their time, input and output columns or
+//! variables (a lab's own header such as `time_s,input_V,sensor_V`), default `t=t,u=u,y=y`. The table
 //! goes to stdout (or one JSON object with `--json`: `{"named", "steps": [{"effect",
 //! "evidence", "params", "rms_before_v", "rms_after_v", "refit", "removed"}] (a step's
 //! `effect` joins with `+` the effects it fitted together: a refit, or `X+offset`),
@@ -40,7 +41,8 @@ pub struct GapArgs {
     /// Print one JSON object instead of the table.
     #[arg(long)]
     pub json: bool,
-    /// Variable names in .mat records: t=NAME,u=NAME,y=NAME.
+    /// Names of the time, input and output columns (CSV header) or variables (.mat):
+    /// t=NAME,u=NAME,y=NAME [default: t=t,u=u,y=y].
     #[arg(long)]
     pub vars: Option<String>,
 }
