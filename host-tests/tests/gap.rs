@@ -1563,7 +1563,7 @@ fn a_record_in_milliseconds_or_with_a_reversed_sign_is_refused_clearly() {
         err.contains("mv.csv")
             && err.contains("1000.0")
             && err.contains("times as far")
-            && err.contains("mV"),
+            && err.contains("other units"),
         "{err}"
     );
     let reversed: Vec<f64> = y.iter().map(|v| -v).collect();
@@ -1610,6 +1610,17 @@ fn a_labs_own_column_names_are_read_through_vars() {
         err.contains("no column `t`")
             && err.contains("time_s,input_V,sensor_V")
             && err.contains("--vars"),
+        "{err}"
+    );
+    let err = gap::load_data(
+        std::slice::from_ref(&path),
+        Some("t=time_s,u=input_V,y=sensor_v"),
+    )
+    .err()
+    .map(|e| format!("{e:#}"))
+    .unwrap_or_default();
+    assert!(
+        err.contains("no output column `sensor_v`") && err.contains("--vars"),
         "{err}"
     );
     let data = gap::load_data(

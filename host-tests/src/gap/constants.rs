@@ -89,6 +89,9 @@ pub const SCALE_APART_MAX: f64 = 5.0;
 /// held input is a staircase the stage never saw). A record whose time column is in
 /// milliseconds reads 1000 times slower, and the refusal says so.
 pub const GAP_MIN_RATE_HZ: f64 = 1000.0;
+/// The share below [`GAP_MIN_RATE_HZ`] a record's rate may read (our assumption: time stamps
+/// rounded to a few digits make a 1 kHz record read a little under 1000 Hz).
+pub const GAP_RATE_TOLERANCE: f64 = 0.01;
 /// Fewest samples a record must have to show anything.
 pub const MIN_SAMPLES: usize = 200;
 /// Records at or above this rate are "fast" (edges resolved), volts... Hz.
@@ -189,9 +192,9 @@ pub const CREEP_START_MIN_FLOORS: f64 = 5.0;
 /// Longest stride, seconds, over which the noise floor looks for coloured noise to decorrelate
 /// ([`super::data::strided_floor`]; our assumption: a sensor or anti-alias filter of 300 Hz
 /// or more, whose noise decorrelates within three of its time constants, 1.6 ms at 300 Hz,
-/// and shows its plateau one doubling later; the thesis' E-509 has 10 kHz, sec. 2.4). Slower
-/// noise is not told from a slow effect.
-pub const NOISE_DECORRELATE_MAX_S: f64 = 4e-3;
+/// shows its plateau one doubling later and holds it one more, 6.4 ms; the thesis' E-509 has
+/// 10 kHz, sec. 2.4). Slower noise is not told from a slow effect.
+pub const NOISE_DECORRELATE_MAX_S: f64 = 8e-3;
 
 /// How much the noise estimate must grow from one stride to the next (twice as long) for the
 /// noise to count as still correlated ([`super::data::strided_floor`]; our assumption: on
@@ -201,8 +204,9 @@ pub const NOISE_DECORRELATE_MAX_S: f64 = 4e-3;
 /// value is within a few per cent of the whole standard deviation).
 pub const NOISE_STRIDE_GROWTH: f64 = 1.1;
 
-/// The most of the noise estimate at a stride that the signal's own estimate there (the
-/// input's, scaled by the stage's gain) may be for the growth to count as the noise's
+/// The most of the noise estimate at a stride that the signal's own estimate there (the same
+/// estimate on the base model's simulated output) may be for the growth to count as the
+/// noise's
 /// ([`super::data::strided_floor`]; our assumption: a signal a quarter of the noise adds 3 %
 /// to it in quadrature, within the plateau's own tolerance).
 pub const NOISE_SIGNAL_SHARE: f64 = 0.25;
@@ -218,16 +222,31 @@ pub const RECORD_BITS_MAX: i32 = 16;
 /// never flip a code give as many values as levels, and their gaps are the levels').
 pub const STEP_MIN_VALUES: usize = 32;
 
+/// Gaps between output values below this share of the output's span (or of
+/// `STEP_TEXT_MIN_SPAN_V`, for a record that barely moves) are the decimal text's rounding,
+/// not a converter's step (`super::data::output_step_v`; our assumption: a millionth is 20
+/// bits, finer than any converter a lab records with, coarser than a printed float's digits).
+pub const STEP_TEXT_SHARE: f64 = 1e-6;
+/// See [`STEP_TEXT_SHARE`], volts (our assumption: 1 mV, a span below which a record shows
+/// nothing the workflow reads).
+pub const STEP_TEXT_MIN_SPAN_V: f64 = 1e-3;
+
+/// Fewest differences a stride's noise estimate takes for the walk to go on
+/// (`super::data::strided_floor`; our assumption: over a thousand the estimate's spread is
+/// 2 %, well inside `NOISE_STRIDE_GROWTH`'s tenth; fewer, a growth of a tenth can be the
+/// estimate's own).
+pub const NOISE_WALK_MIN_DIFFS: usize = 1000;
+
 /// How far off its neighbours' median, in noise floors, one output sample must be to count
 /// as a glitch of the recording (`super::data::glitches`; our assumption: Gaussian noise
 /// goes 10 sigma off with probability 1e-23, and a glitch that small moves a 50 000-sample
 /// record's RMS by a twentieth of a floor at most).
 pub const GLITCH_FLOORS: f64 = 10.0;
 
-/// How close to their own median, in noise floors, a glitch's four neighbours must stay
-/// (`super::data::glitches`; our assumption: four Gaussian samples stray 4 sigma from their
-/// median with probability about 3e-4, and an edge, a ringing mode or a sine that moves the
-/// output 10 floors in a sample spreads its neighbours further).
+/// How close to their own median, in noise floors, a glitch's six neighbours must stay
+/// (`super::data::glitches`; our assumption: six Gaussian samples stray 4 sigma from their
+/// median with probability about 4e-4, and an edge, a ringing mode or a sine that moves the
+/// residual 10 floors in a sample spreads its neighbours further).
 pub const GLITCH_SPREAD_FLOORS: f64 = 4.0;
 
 /// Shortest run of constant input that counts as a hold, seconds (our assumption: long enough

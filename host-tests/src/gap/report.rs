@@ -268,6 +268,9 @@ fn esc(s: &str) -> String {
 /// Write `dir/index.html`.
 pub fn write(dir: &Path, base: &ModelFile, data: &[Data], d: &Diagnosis) -> anyhow::Result<()> {
     std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
+    // (the records as the diagnosis read them: glitches replaced, as the notes say)
+    let cleaned = d.cleaned(data);
+    let data: &[Data] = &cleaned;
     let mut h = String::new();
     let _ = write!(
         h,

@@ -100,6 +100,9 @@ pub struct Diagnosis {
     /// found ([`super::data::NoiseFloor::note`]), and each record's single-sample glitches,
     /// replaced before the fits ([`super::data::without_glitches`]).
     pub noise_notes: Vec<String>,
+    /// Each record's single-sample glitches, replaced before the fits: (sample index, value
+    /// it was replaced by) ([`super::data::glitches`]; [`Diagnosis::cleaned`] applies them).
+    pub glitches: Vec<Vec<(usize, f64)>>,
     /// Noise floor, volts (root of the mean of the records' variances).
     pub noise_floor_v: f64,
     /// Residual RMS of the final model, volts.
@@ -190,6 +193,23 @@ impl CentreChoice {
 }
 
 impl Diagnosis {
+    /// The records as the diagnosis read them: `data` with its glitches replaced (what its
+    /// residuals and plots are of).
+    pub fn cleaned(&self, data: &[Data]) -> Vec<Data> {
+        data.iter()
+            .enumerate()
+            .map(|(r, d)| {
+                let mut c = d.clone();
+                for &(i, v) in self.glitches.get(r).map_or(&[][..], |g| g.as_slice()) {
+                    if let Some(y) = c.y_v.get_mut(i) {
+                        *y = v;
+                    }
+                }
+                c
+            })
+            .collect()
+    }
+
     /// Each record's final mean squared residual.
     fn final_mse(&self) -> Vec<f64> {
         self.record_final_rms_v.iter().map(|r| r * r).collect()
@@ -523,21 +543,25 @@ fn moves_against(y: &[f64], sim: &[f64], floor_v: f64) -> Option<f64> {
 }
 
 /// How many times as far a record's output `y` moves as the model's simulated output `sim`
-/// (standard deviations), where that is beyond `SCALE_APART_MAX` either way and the record
-/// moves more than `REVERSED_MIN_FLOORS` of its noise floors: a record in other units.
-/// `None` otherwise.
+/// (the magnitude of the slope of `y` on `sim`, which a drift or an offset the model lacks
+/// leaves near 1), where that is beyond `SCALE_APART_MAX` either way and the simulation moves
+/// more than `REVERSED_MIN_FLOORS` of the record's floors (`floor_v`, in the record's units,
+/// brought to the model's by the slope): a record in other units. `None` otherwise.
 fn scale_apart(y: &[f64], sim: &[f64], floor_v: f64) -> Option<f64> {
     let n = y.len().min(sim.len());
-    let sd = |v: &[f64]| {
-        let m = v.iter().sum::<f64>() / v.len().max(1) as f64;
-        (v.iter().map(|x| (x - m) * (x - m)).sum::<f64>() / v.len().max(1) as f64).sqrt()
-    };
-    let (sy, ss) = (sd(&y[..n]), sd(&sim[..n]));
-    let k = sy / ss.max(1e-300);
-    // (the record's own floor is in the record's units: it is the record that must move)
-    (n >= 2
-        && ss > 0.0
-        && sy > REVERSED_MIN_FLOORS * floor_v
+    if n < 2 {
+        return None;
+    }
+    let my = y[..n].iter().sum::<f64>() / n as f64;
+    let ms = sim[..n].iter().sum::<f64>() / n as f64;
+    let (mut sxy, mut sxx) = (0.0, 0.0);
+    for (a, b) in y[..n].iter().zip(&sim[..n]) {
+        sxy += (a - my) * (b - ms);
+        sxx += (b - ms) * (b - ms);
+    }
+    let k = (sxy / sxx.max(1e-300)).abs();
+    let sd_sim = (sxx / n as f64).sqrt();
+    (sd_sim * k.max(1e-300) > REVERSED_MIN_FLOORS * floor_v
         && !(1.0 / SCALE_APART_MAX..=SCALE_APART_MAX).contains(&k))
     .then_some(k)
 }
@@ -598,16 +622,47 @@ pub fn diagnose(base: &ModelFile, data: &[Data], opts: &Options) -> anyhow::Resu
         .map(|(d, s)| noise_floor_of(d, Some(s)))
         .collect();
     let noise: Vec<f64> = floors.iter().map(|f| f.sigma_v).collect();
+    let mut noise_notes: Vec<String> = floors
+        .iter()
+        .zip(data)
+        .filter_map(|(f, d)| f.note(&d.name))
+        .collect();
+    let var: Vec<f64> = noise.iter().map(|s| (s * s).max(1e-14)).collect();
+    let noise_floor_v = (var.iter().sum::<f64>() / var.len() as f64).sqrt();
+    // (single-sample glitches of the recording are replaced before anything is judged or
+    // fitted, and said with the floors)
+    let mut glitches = Vec::new();
+    let cleaned: Vec<Data> = data
+        .iter()
+        .zip(&noise)
+        .zip(&base_sims)
+        .map(|((d, &f), s)| {
+            let (c, found, note) = without_glitches(d, f, Some(s));
+            noise_notes.extend(note);
+            glitches.push(found);
+            c
+        })
+        .collect();
+    let data: &[Data] = &cleaned;
     for ((d, s), f) in data.iter().zip(&base_sims).zip(&noise) {
+        if let Some(c) = moves_against(&d.y_v, s, *f) {
+            bail!(
+                "record {}: its output moves against the model's (correlation {c:.2} between the \
+                 record's y and the model's simulated output): is the sensor's sign reversed, or \
+                 are u and y in each other's columns? The workflow names small departures from \
+                 the model, not a reversed sign",
+                d.name
+            );
+        }
         if let Some(k) = scale_apart(&d.y_v, s, *f) {
             let (ylo, yhi) = min_max(&d.y_v);
             let (slo, shi) = min_max(s);
             bail!(
-                "record {}: its output moves {} times as far as the model's (y spans {:.4} to \
-                 {:.4} V, the model's simulated output {:.4} to {:.4} V): is y in other units \
-                 (mV, um, nm), or is the model not this stage's? The workflow names small \
-                 departures from the model; a scale error within {SCALE_APART_MAX}x is its \
-                 `sensor-gain`",
+                "record {}: its output moves {} times as far as the model's (the slope of y on \
+                 the model's simulated output; y spans {:.4} to {:.4} V, the model's output \
+                 {:.4} to {:.4} V): is y in other units (mV, um, nm), or is the model not this \
+                 stage's? The workflow names small departures from the model; a scale error \
+                 within {SCALE_APART_MAX}x is its `sensor-gain`",
                 d.name,
                 if k >= 1.0 {
                     format!("{k:.3}")
@@ -620,36 +675,7 @@ pub fn diagnose(base: &ModelFile, data: &[Data], opts: &Options) -> anyhow::Resu
                 shi
             );
         }
-        if let Some(c) = moves_against(&d.y_v, s, *f) {
-            bail!(
-                "record {}: its output moves against the model's (correlation {c:.2} between the \
-                 record's y and the model's simulated output): is the sensor's sign reversed, or \
-                 are u and y in each other's columns? The workflow names small departures from \
-                 the model, not a reversed sign",
-                d.name
-            );
-        }
     }
-    let noise_notes: Vec<String> = floors
-        .iter()
-        .zip(data)
-        .filter_map(|(f, d)| f.note(&d.name))
-        .collect();
-    let var: Vec<f64> = noise.iter().map(|s| (s * s).max(1e-14)).collect();
-    let noise_floor_v = (var.iter().sum::<f64>() / var.len() as f64).sqrt();
-    // (single-sample glitches of the recording are replaced before anything is fitted, and
-    // said with the floors)
-    let mut noise_notes = noise_notes;
-    let cleaned: Vec<Data> = data
-        .iter()
-        .zip(&noise)
-        .map(|(d, &f)| {
-            let (c, note) = without_glitches(d, f);
-            noise_notes.extend(note);
-            c
-        })
-        .collect();
-    let data: &[Data] = &cleaned;
     let base_sigs = signatures::compute(data, &base_sims, &noise);
     let rows = solve_rows(data, base, &noise)?;
     let slow_x = slow_regressors(data, rows, &[], base.plant.static_gain, CentreLine::Band);
@@ -660,6 +686,7 @@ pub fn diagnose(base: &ModelFile, data: &[Data], opts: &Options) -> anyhow::Resu
         bar: bar.as_ref(),
         noise,
         noise_notes,
+        glitches,
         var,
         noise_floor_v,
         u_range,
@@ -706,6 +733,7 @@ struct Setup<'a> {
     bar: Option<&'a indicatif::ProgressBar>,
     noise: Vec<f64>,
     noise_notes: Vec<String>,
+    glitches: Vec<Vec<(usize, f64)>>,
     var: Vec<f64>,
     noise_floor_v: f64,
     u_range: (f64, f64),
@@ -1673,6 +1701,7 @@ fn diagnose_split(
         steps,
         record_noise_v: noise,
         noise_notes: setup.noise_notes.clone(),
+        glitches: setup.glitches.clone(),
         noise_floor_v,
         final_rms_v,
         record_final_rms_v: cur_mse.iter().map(|m| m.sqrt()).collect(),
@@ -2223,6 +2252,7 @@ mod tests {
             steps: Vec::new(),
             record_noise_v: vec![1e-3],
             noise_notes: Vec::new(),
+            glitches: Vec::new(),
             noise_floor_v: 1e-3,
             final_rms_v: rms_v,
             record_final_rms_v: vec![rms_v],

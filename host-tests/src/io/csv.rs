@@ -119,10 +119,7 @@ pub enum RecordError {
     #[error("empty record: no header row (expected a line naming the columns, e.g. `t,u,y`)")]
     Empty,
     /// A required column is missing from the header.
-    #[error(
-        "line {line}: header has no column `{column}` (found: {found}; name other columns with \
-         --vars t=NAME,u=NAME,y=NAME)"
-    )]
+    #[error("line {line}: header has no column `{column}` (found: {found})")]
     MissingColumn {
         /// 1-based line of the header.
         line: usize,

@@ -8,8 +8,8 @@
 //! goes to stdout (or one JSON object with `--json`: `{"named", "steps": [{"effect",
 //! "evidence", "params", "rms_before_v", "rms_after_v", "refit", "removed"}] (a step's
 //! `effect` joins with `+` the effects it fitted together: a refit, or `X+offset`),
-//! "noise_floor_v", "noise_notes" (one sentence per record whose noise is coloured, saying
-//! where its floor was read),
+//! "noise_floor_v", "noise_notes" (one sentence per record whose floor was read past white
+//! noise, coloured or below the record's resolution, or whose glitches were replaced),
 //! "final_rms_v", "unexplained", "cannot_tell", "hysteresis_split": {"chosen",
 //! "band_noise_var", "span_noise_var", "rise_noise_var", "by_diagnosis"}}`; `chosen` is
 //! `"band"`, `"span"` or `"rise"`; `rise_noise_var` only where the rise split was fitted
