@@ -1529,11 +1529,7 @@ fn glitches_of_the_recording_are_replaced_and_said() {
 /// millivolts (1000 times the model's: before, an error that a figure came out as NaN).
 #[test]
 fn a_record_in_milliseconds_or_with_a_reversed_sign_is_refused_clearly() {
-    let (t, u) = raised_cosine(5_000.0, 2.0, 1.0, 5.0, 4.5);
-    let mut truth = ModelFile::built_in("thesis-linear").unwrap();
-    truth.converters.noise_v = 1e-3;
-    let stage = truth.build_stage().unwrap();
-    let y = simulate(&stage, truth.period_s, &t, &u);
+    let (truth, t, u, y) = clean_thesis_sine(2.0);
     let t_ms: Vec<f64> = t.iter().map(|x| 1e3 * x).collect();
     let err = Data::from_record(
         "ms.csv",
@@ -1555,10 +1551,7 @@ fn a_record_in_milliseconds_or_with_a_reversed_sign_is_refused_clearly() {
         )
         .unwrap(),
     ];
-    let err = diagnose(&truth, &data, &Options::default())
-        .err()
-        .map(|e| e.to_string())
-        .unwrap_or_default();
+    let err = refusal(&truth, &data);
     assert!(
         err.contains("mv.csv")
             && err.contains("1000.0")
@@ -1574,10 +1567,7 @@ fn a_record_in_milliseconds_or_with_a_reversed_sign_is_refused_clearly() {
         )
         .unwrap(),
     ];
-    let err = diagnose(&truth, &data, &Options::default())
-        .err()
-        .map(|e| e.to_string())
-        .unwrap_or_default();
+    let err = refusal(&truth, &data);
     assert!(
         err.contains("reversed.csv") && err.contains("moves against") && err.contains("-1.00"),
         "{err}"
@@ -1589,11 +1579,7 @@ fn a_record_in_milliseconds_or_with_a_reversed_sign_is_refused_clearly() {
 /// as under the house header.
 #[test]
 fn a_labs_own_column_names_are_read_through_vars() {
-    let (t, u) = raised_cosine(5_000.0, 2.0, 1.0, 5.0, 4.5);
-    let mut truth = ModelFile::built_in("thesis-linear").unwrap();
-    truth.converters.noise_v = 1e-3;
-    let stage = truth.build_stage().unwrap();
-    let y = simulate(&stage, truth.period_s, &t, &u);
+    let (truth, t, u, y) = clean_thesis_sine(2.0);
     let dir = std::env::temp_dir().join(format!("piezo-gap-vars-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let path = dir.join("lab.csv");
@@ -1632,4 +1618,23 @@ fn a_labs_own_column_names_are_read_through_vars() {
     let d = diagnose(&truth, &data, &Options::default()).unwrap();
     assert!(d.named.is_empty(), "{:?}", d.named);
     let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// The thesis-linear stage (1 mV of noise) on `seconds` of a 1 Hz sine over 0.5-9.5 V at
+/// 5 kHz: (the model, t, u, y).
+fn clean_thesis_sine(seconds: f64) -> (ModelFile, Vec<f64>, Vec<f64>, Vec<f64>) {
+    let (t, u) = raised_cosine(5_000.0, seconds, 1.0, 5.0, 4.5);
+    let mut truth = ModelFile::built_in("thesis-linear").unwrap();
+    truth.converters.noise_v = 1e-3;
+    let stage = truth.build_stage().unwrap();
+    let y = simulate(&stage, truth.period_s, &t, &u);
+    (truth, t, u, y)
+}
+
+/// The words of the diagnosis' refusal of `data` from `base` (empty if it was not refused).
+fn refusal(base: &ModelFile, data: &[Data]) -> String {
+    diagnose(base, data, &Options::default())
+        .err()
+        .map(|e| e.to_string())
+        .unwrap_or_default()
 }

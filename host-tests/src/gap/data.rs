@@ -435,7 +435,10 @@ pub fn output_step_v(y: &[f64]) -> (f64, bool, f64) {
 /// Nothing the stage does moves it so: a dynamics the model lacks (a mode, a delay) moves
 /// several samples, which spreads the neighbours, so this is the recording's (an ADC's or a
 /// logger's glitch), and one such sample in 50 000 moves a record's RMS by up to several
-/// floors. Three neighbours a side, not two: a stage ringing at a third of the sampling rate
+/// floors. Samples within three of an input edge are left: there a delay or a slew limit the
+/// model lacks is a one-sample spike of the residual at 1 kHz (families cases 1022 and 1027,
+/// whose true delay went with it). Three neighbours a side, not two: a stage ringing at a
+/// third of the sampling rate
 /// (families case 1032, 12 mV at 6.3 kHz sampled at 19 kHz) repeats each phase every third
 /// sample, and with two a side one phase's samples stood alone among the other two's. Two
 /// glitches side by side spread each other's neighbours and are left. Returns each glitch's
@@ -454,7 +457,20 @@ pub fn glitches(d: &Data, floor_v: f64, model_y: Option<&[f64]>) -> Vec<(usize, 
     };
     let (_, _, gap_v) = output_step_v(&d.y_v);
     let bar_v = GLITCH_FLOORS * floor_v.max(gap_v);
+    // (samples within three of an input edge are left: a delay or a slew limit the model
+    // lacks puts a one-sample spike in the residual at an edge sampled at 1 kHz)
+    let mut near_edge = vec![false; n];
+    for j in 1..n {
+        if d.is_jump(j) {
+            for flag in &mut near_edge[j.saturating_sub(4)..(j + 4).min(n)] {
+                *flag = true;
+            }
+        }
+    }
     for i in 3..n - 3 {
+        if near_edge[i] {
+            continue;
+        }
         let mut nb = [r[i - 3], r[i - 2], r[i - 1], r[i + 1], r[i + 2], r[i + 3]];
         nb.sort_by(f64::total_cmp);
         let med = 0.5 * (nb[2] + nb[3]);
