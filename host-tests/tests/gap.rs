@@ -1606,7 +1606,7 @@ fn a_labs_own_column_names_are_read_through_vars() {
     .map(|e| format!("{e:#}"))
     .unwrap_or_default();
     assert!(
-        err.contains("no output column `sensor_v`") && err.contains("--vars"),
+        err.contains("no `sensor_v` column") && err.contains("--vars"),
         "{err}"
     );
     let data = gap::load_data(
