@@ -405,6 +405,7 @@ pub fn noise_floor_of(d: &Data, model_y: Option<&[f64]>) -> NoiseFloor {
 /// of the span are the decimal text's, not a converter's. An output of fewer than
 /// `STEP_MIN_VALUES` distinct values (held levels that never flip a code) hides the step:
 /// there the span's share stands in for it.
+///
 /// Returns the step, whether the output showed it, and the smallest gap itself (the output's
 /// span where it takes one value).
 pub fn output_step_v(y: &[f64]) -> (f64, bool, f64) {
@@ -432,18 +433,17 @@ pub fn output_step_v(y: &[f64]) -> (f64, bool, f64) {
 /// `GLITCH_SPREAD_FLOORS` floors of it, in the record's residual from `model_y` (the base
 /// model's simulated output: a one-sample pulse of the input at 1 kHz, which the stage
 /// follows within the sample, is in the model's output too, and leaves no residual spike).
-/// Nothing the stage does moves it so: a dynamics the model lacks (a mode, a delay) moves
-/// several samples, which spreads the neighbours, so this is the recording's (an ADC's or a
-/// logger's glitch), and one such sample in 50 000 moves a record's RMS by up to several
-/// floors. Samples within three of an input edge are left: there a delay or a slew limit the
-/// model lacks is a one-sample spike of the residual at 1 kHz (families cases 1022 and 1027,
-/// whose true delay went with it). Three neighbours a side, not two: a stage ringing at a
-/// third of the sampling rate
-/// (families case 1032, 12 mV at 6.3 kHz sampled at 19 kHz) repeats each phase every third
-/// sample, and with two a side one phase's samples stood alone among the other two's. Two
-/// glitches side by side spread each other's neighbours and are left. Returns each glitch's
-/// index and the value it is replaced by (the model's output there plus the neighbours'
-/// median residual).
+/// Away from the input's edges nothing the stage does moves it so: a dynamics the model lacks
+/// (a mode) moves several samples, which spreads the neighbours, so this is the recording's
+/// (an ADC's or a logger's glitch), and one such sample in 50 000 moves a record's RMS by up
+/// to several floors. Samples within three of an input edge are left: there a delay or a
+/// slew limit the model lacks is a one-sample spike of the residual at 1 kHz (families cases
+/// 1022 and 1027, whose true delay went with it). Three neighbours a side, not two: a stage
+/// ringing at a third of the sampling rate (families case 1032, 12 mV at 6.3 kHz sampled at
+/// 19 kHz) repeats each phase every third sample, and with two a side one phase's samples
+/// stood alone among the other two's. Two glitches side by side spread each other's
+/// neighbours and are left. Returns each glitch's index and the value it is replaced by (the
+/// model's output there plus the neighbours' median residual).
 pub fn glitches(d: &Data, floor_v: f64, model_y: Option<&[f64]>) -> Vec<(usize, f64)> {
     let n = d.y_v.len();
     let mut out = Vec::new();
