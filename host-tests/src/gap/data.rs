@@ -177,6 +177,18 @@ impl Data {
         })
     }
 
+    /// The record with output samples replaced: `(index, value)` pairs, as [`glitches`] gives
+    /// them (an index beyond the record is left out).
+    pub fn with_samples_replaced(&self, samples: &[(usize, f64)]) -> Self {
+        let mut c = self.clone();
+        for &(i, v) in samples {
+            if let Some(y) = c.y_v.get_mut(i) {
+                *y = v;
+            }
+        }
+        c
+    }
+
     /// Sampling period, seconds.
     pub fn period_s(&self) -> f64 {
         let n = self.t_s.len();
@@ -372,27 +384,23 @@ pub fn noise_floor_of(d: &Data, model_y: Option<&[f64]>) -> NoiseFloor {
     let max_stride = ((NOISE_DECORRELATE_MAX_S / d.period_s()).floor() as usize).max(1);
     let (step_v, step_seen, _) = output_step_v(&d.y_v);
     let rounding_v = step_v / 12f64.sqrt();
-    let close_v = floor_within(d, model_y, 1).0;
-    if close_v < rounding_v {
-        // (noise below the record's steps: the differences see the steps, not the noise,
-        // and the strides' growth is the signal crossing them)
-        return NoiseFloor {
-            sigma_v: rounding_v,
-            close_v,
-            decorrelated_s: None,
-            step_v,
-            step_seen,
-            by_resolution: true,
-        };
-    }
     let (noise_v, stride) = floor_within(d, model_y, max_stride);
+    // (the neighbours' estimate is the walk's first: read again only where it walked on)
+    let close_v = if stride == 1 {
+        noise_v
+    } else {
+        floor_within(d, model_y, 1).0
+    };
+    // (noise below the record's steps: the differences see the steps, not the noise, and the
+    // strides' growth is the signal crossing them)
+    let by_resolution = close_v < rounding_v;
     NoiseFloor {
-        sigma_v: noise_v,
+        sigma_v: if by_resolution { rounding_v } else { noise_v },
         close_v,
-        decorrelated_s: (stride > 1).then(|| stride as f64 * d.period_s()),
+        decorrelated_s: (stride > 1 && !by_resolution).then(|| stride as f64 * d.period_s()),
         step_v,
         step_seen,
-        by_resolution: false,
+        by_resolution,
     }
 }
 
@@ -493,13 +501,12 @@ pub fn without_glitches(
     if found.is_empty() {
         return (d.clone(), found, None);
     }
-    let mut c = d.clone();
+    let c = d.with_samples_replaced(&found);
     let (mut lo, mut hi) = (f64::INFINITY, 0.0f64);
     for &(i, med) in &found {
         let off = (d.y_v[i] - med).abs();
         lo = lo.min(off);
         hi = hi.max(off);
-        c.y_v[i] = med;
     }
     let at: Vec<String> = found
         .iter()

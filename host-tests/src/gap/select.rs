@@ -198,15 +198,7 @@ impl Diagnosis {
     pub fn cleaned(&self, data: &[Data]) -> Vec<Data> {
         data.iter()
             .enumerate()
-            .map(|(r, d)| {
-                let mut c = d.clone();
-                for &(i, v) in self.glitches.get(r).map_or(&[][..], |g| g.as_slice()) {
-                    if let Some(y) = c.y_v.get_mut(i) {
-                        *y = v;
-                    }
-                }
-                c
-            })
+            .map(|(r, d)| d.with_samples_replaced(self.glitches.get(r).map_or(&[], Vec::as_slice)))
             .collect()
     }
 
@@ -538,8 +530,9 @@ struct Candidate {
 /// `REVERSED_MIN_FLOORS` noise floors (`floor_v`, standard deviation): a record whose sensor's
 /// sign is reversed. `None` otherwise.
 fn moves_against(y: &[f64], sim: &[f64], floor_v: f64) -> Option<f64> {
-    let (c, moves) = correlation(y, sim, floor_v)?;
-    (moves && c < -REVERSED_CORRELATION).then_some(c)
+    let m = OnModel::of(y, sim)?;
+    (m.sd_sim_v > REVERSED_MIN_FLOORS * floor_v && m.correlation < -REVERSED_CORRELATION)
+        .then_some(m.correlation)
 }
 
 /// How many times as far a record's output `y` moves as the model's simulated output `sim`
@@ -548,41 +541,42 @@ fn moves_against(y: &[f64], sim: &[f64], floor_v: f64) -> Option<f64> {
 /// more than `REVERSED_MIN_FLOORS` of the record's floors (`floor_v`, in the record's units,
 /// brought to the model's by the slope): a record in other units. `None` otherwise.
 fn scale_apart(y: &[f64], sim: &[f64], floor_v: f64) -> Option<f64> {
-    let n = y.len().min(sim.len());
-    if n < 2 {
-        return None;
-    }
-    let my = y[..n].iter().sum::<f64>() / n as f64;
-    let ms = sim[..n].iter().sum::<f64>() / n as f64;
-    let (mut sxy, mut sxx) = (0.0, 0.0);
-    for (a, b) in y[..n].iter().zip(&sim[..n]) {
-        sxy += (a - my) * (b - ms);
-        sxx += (b - ms) * (b - ms);
-    }
-    let k = (sxy / sxx.max(1e-300)).abs();
-    let sd_sim = (sxx / n as f64).sqrt();
-    (sd_sim * k.max(1e-300) > REVERSED_MIN_FLOORS * floor_v
+    let m = OnModel::of(y, sim)?;
+    let k = m.slope.abs();
+    (m.sd_sim_v * k.max(1e-300) > REVERSED_MIN_FLOORS * floor_v
         && !(1.0 / SCALE_APART_MAX..=SCALE_APART_MAX).contains(&k))
     .then_some(k)
 }
 
-/// The correlation of `y` with `sim`, and whether `sim` moves more than `REVERSED_MIN_FLOORS`
-/// noise floors (standard deviation).
-fn correlation(y: &[f64], sim: &[f64], floor_v: f64) -> Option<(f64, bool)> {
-    let n = y.len().min(sim.len());
-    if n < 2 {
-        return None;
+/// A record's output against the model's simulated output: the slope of the one on the other,
+/// their correlation, and how far the simulation moves (standard deviation, volts).
+struct OnModel {
+    slope: f64,
+    correlation: f64,
+    sd_sim_v: f64,
+}
+
+impl OnModel {
+    /// `y` on `sim` over their common length; `None` under two samples.
+    fn of(y: &[f64], sim: &[f64]) -> Option<Self> {
+        let n = y.len().min(sim.len());
+        if n < 2 {
+            return None;
+        }
+        let my = y[..n].iter().sum::<f64>() / n as f64;
+        let ms = sim[..n].iter().sum::<f64>() / n as f64;
+        let (mut sxy, mut sxx, mut syy) = (0.0, 0.0, 0.0);
+        for (a, b) in y[..n].iter().zip(&sim[..n]) {
+            sxy += (a - my) * (b - ms);
+            syy += (a - my) * (a - my);
+            sxx += (b - ms) * (b - ms);
+        }
+        Some(Self {
+            slope: sxy / sxx.max(1e-300),
+            correlation: sxy / (sxx * syy).sqrt().max(1e-300),
+            sd_sim_v: (sxx / n as f64).sqrt(),
+        })
     }
-    let my = y[..n].iter().sum::<f64>() / n as f64;
-    let ms = sim[..n].iter().sum::<f64>() / n as f64;
-    let (mut sxy, mut sxx, mut syy) = (0.0, 0.0, 0.0);
-    for (a, b) in y[..n].iter().zip(&sim[..n]) {
-        sxy += (a - my) * (b - ms);
-        syy += (a - my) * (a - my);
-        sxx += (b - ms) * (b - ms);
-    }
-    let moves = (sxx / n as f64).sqrt() > REVERSED_MIN_FLOORS * floor_v;
-    Some((sxy / (sxx * syy).sqrt().max(1e-300), moves))
 }
 
 /// Run the workflow from `base` on `data`.
