@@ -1433,19 +1433,10 @@ fn assert_thesis_stage_with_offset_named(
 /// `corner_hz`, sampled at `rate_hz` (`n` samples): a sensor whose bandwidth is below the
 /// record's Nyquist rate.
 fn coloured_noise(n: usize, rate_hz: f64, corner_hz: f64, sigma_v: f64, seed: u64) -> Vec<f64> {
-    use rand_distr::{Distribution, StandardNormal};
-    let mut rng = rand::rngs::StdRng::seed_from_u64(seed);
-    let a = (-2.0 * std::f64::consts::PI * corner_hz / rate_hz).exp();
-    let mut s = 0.0;
-    let w: Vec<f64> = (0..n)
-        .map(|_| {
-            let x: f64 = StandardNormal.sample(&mut rng);
-            s = a * s + (1.0 - a) * x;
-            s
-        })
-        .collect();
-    let sd = (w.iter().map(|x| x * x).sum::<f64>() / n as f64).sqrt();
-    w.iter().map(|x| sigma_v * x / sd).collect()
+    host_tests::testing::filtered_noise(n, rate_hz, corner_hz, 1, seed)
+        .into_iter()
+        .map(|x| sigma_v * x)
+        .collect()
 }
 
 /// The lab's own rig: the thesis' E-509 sensor has a 10 kHz bandwidth (sec. 2.4), so its

@@ -787,23 +787,11 @@ mod tests {
         order: usize,
         u: impl Fn(f64) -> f64,
     ) -> (Data, f64) {
-        use rand::SeedableRng;
-        use rand_distr::{Distribution, StandardNormal};
         let n = (rate_hz * seconds) as usize;
-        let mut rng = rand::rngs::StdRng::seed_from_u64(11);
-        let mut w: Vec<f64> = (0..n).map(|_| StandardNormal.sample(&mut rng)).collect();
-        let a = (-2.0 * std::f64::consts::PI * corner_hz / rate_hz).exp();
-        for _ in 0..order {
-            let mut s = 0.0;
-            for x in w.iter_mut() {
-                s = a * s + (1.0 - a) * *x;
-                *x = s;
-            }
-        }
-        let sd = (w.iter().map(|x| x * x).sum::<f64>() / n as f64).sqrt();
+        let w = crate::testing::filtered_noise(n, rate_hz, corner_hz, order, 11);
         let t: Vec<f64> = (0..n).map(|i| i as f64 / rate_hz).collect();
         let uv: Vec<f64> = t.iter().map(|&x| u(x)).collect();
-        let y: Vec<f64> = uv.iter().zip(&w).map(|(a, b)| a + 1e-3 * b / sd).collect();
+        let y: Vec<f64> = uv.iter().zip(&w).map(|(a, b)| a + 1e-3 * b).collect();
         let d = Data::from_record("noisy", Record::new(t, uv, Some(y), None).unwrap()).unwrap();
         (d, 1e-3)
     }
