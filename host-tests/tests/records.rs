@@ -110,8 +110,9 @@ fn rounded_time_stamps_are_taken_as_uniform_with_a_note() {
     assert!(err(&s).contains("sampling interval"), "{}", err(&s));
 }
 
-/// Spreadsheets in decimal-comma locales export with semicolons (or tabs) and decimal commas:
-/// read as the comma-separated file with points would be.
+/// Spreadsheets in decimal-comma locales export with semicolons (or tabs) and decimal commas,
+/// loggers and MATLAB write blank-separated columns, and many put a units row under the
+/// header: each read as the comma-separated file with points would be.
 #[test]
 fn semicolon_and_tab_separated_records_read_with_decimal_commas() {
     let commas = Record::parse("t,u,y\n0,0.5,0.25\n0.001,1.5,-0.75\n0.002,2,1e-3\n").unwrap();
@@ -122,6 +123,22 @@ fn semicolon_and_tab_separated_records_read_with_decimal_commas() {
     // A field that is not a number either way is refused with its text.
     let e = err("t;u\n0;1\n0,001;1,2,3\n");
     assert!(e.contains("line 3") && e.contains("1,2,3"), "{e}");
+    // Blank-separated columns (a `.txt` as MATLAB or a logger writes it), and a units row
+    // under the header, read as the same record.
+    let blanks = Record::parse("t  u y\n0 0.5\t0.25\n  0.001 1.5 -0.75\n0.002 2 1e-3\n").unwrap();
+    assert_eq!(blanks, commas);
+    let units = Record::parse("t,u,y\ns,V,V\n0,0.5,0.25\n0.001,1.5,-0.75\n0.002,2,1e-3\n").unwrap();
+    assert_eq!(units, commas);
+    let units = Record::parse("t;u;y\n[s];[V];[V]\n0;0,5;0,25\n0,001;1,5;-0,75\n0,002;2;1e-3\n");
+    assert_eq!(units.unwrap(), commas);
+    // Only one such row, and only first: text further down is refused with its line.
+    let e = err("t,u,y\ns,V,V\ns,V,V\n0,0.5,0.25\n");
+    assert!(e.contains("line 3") && e.contains("`s`"), "{e}");
+    let e = err("t,u,y\n0,0.5,0.25\ns,V,V\n");
+    assert!(e.contains("line 3"), "{e}");
+    // A row with one number among text is no units row.
+    let e = err("t,u,y\ns,1,V\n0,0.5,0.25\n");
+    assert!(e.contains("line 2"), "{e}");
 }
 
 #[test]

@@ -84,6 +84,13 @@ pub const REVERSED_MIN_FLOORS: f64 = 10.0;
 /// mV, um or nm for V).
 pub const SCALE_APART_MAX: f64 = 5.0;
 
+/// A record whose output shows no noise above its own rounding while its input is this many
+/// times noisier than the output's floor is refused as one whose columns are swapped (our
+/// assumption: a command logged as the input is exact or a converter's rounding, a sensor's
+/// reading carries its noise, and a stage filters its input's noise, never adds to it; no
+/// record of the families or hidden-effect suites is refused).
+pub const SWAPPED_NOISE_RATIO: f64 = 3.0;
+
 /// Slowest sampling a record may have, Hz (issue #12: records of any rate from 1 kHz; slower,
 /// the stage's millisecond dynamics and its edges fall between samples, and the simulation's
 /// held input is a staircase the stage never saw). A record whose time column is in
@@ -248,6 +255,54 @@ pub const GLITCH_FLOORS: f64 = 10.0;
 /// median with probability about 4e-4, and an edge, a ringing mode or a sine that moves the
 /// residual 10 floors in a sample spreads its neighbours further).
 pub const GLITCH_SPREAD_FLOORS: f64 = 4.0;
+
+/// Longest run of neighbouring output samples taken as one glitch of the recording
+/// (`super::data::glitches`; our assumption: a logger's or an ADC's burst lasts a sample or
+/// a few, as a dropped or repeated conversion does, while the stage moves over tens of
+/// samples at the least: the fastest mode the catalogue knows rings for several of its
+/// periods, and a delay or a slew limit the model lacks sits at an input's edge, which the
+/// rule leaves).
+pub const GLITCH_RUN_MAX: usize = 3;
+/// Neighbours each side a run of two or more glitch samples must have quiet (within
+/// `GLITCH_SPREAD_FLOORS` of their median; `super::data::glitches`). A mode the model lacks,
+/// ringing at a fifth of the sampling rate, has half periods of two or three samples, and
+/// three neighbours a side could sit in its quieter turns (families cases 1049 and 1096, at
+/// 8.9 kHz sampled at 50 kHz and 3.1 kHz at 15 kHz); ten a side span two of its periods and
+/// more (our assumption: a glitch is one event in a quiet stretch, while a ring lasts several
+/// periods).
+pub const GLITCH_RUN_NEIGHBOURS: usize = 10;
+
+/// Longest stretch of a record over which mains interference is taken as one frequency,
+/// seconds (`super::mains`; our assumption: a grid's frequency wanders by a few hundredths of
+/// a hertz over minutes, a phase drift of a few degrees over 10 s at 50 Hz).
+pub const MAINS_SEGMENT_S: f64 = 10.0;
+/// Shortest stretch of a record in which mains interference is looked for, seconds (our
+/// assumption: ten periods of 50 Hz, the identification protocol's fast record, whose bins
+/// of 5 Hz still hold the line apart from the residual around it, 20 Hz away and more).
+pub const MAINS_MIN_S: f64 = 0.2;
+/// Rate the residual is block-averaged to before its spectrum is read, Hz (our assumption:
+/// above twice the highest mains line looked for, 300 Hz, with room for the block mean's
+/// droop, 4 % at 300 Hz).
+pub const MAINS_DECIMATED_HZ: f64 = 2000.0;
+/// How far from its nominal a mains line is looked for, as a share of its frequency (our
+/// assumption: grids hold 50 or 60 Hz within 0.5 % in normal operation; twice that).
+pub const MAINS_GRID_SHARE: f64 = 0.01;
+/// How many times the residual's power around it (and at the input's neighbouring
+/// harmonics) a mains line's must be to be taken as interference (our assumption: a bin of
+/// broadband residual, exponentially distributed in power, exceeds 20 times its median with
+/// probability 1e-6, about 1e-4 over the bins the ten lines' windows hold; a loop's harmonics
+/// stand within a few times of their neighbours; and 2 mV of hum beside the identification
+/// protocol's steps stands 30 times above their misfit's spectrum over 10 s at 1 kHz).
+pub const MAINS_LINE_RATIO: f64 = 20.0;
+/// Share of a mains line's power the model's own output may have at its frequency, as a line
+/// of its own, for the line to be the measurement's (our assumption: a misfit of a driven
+/// line is a few tens of per cent of it in amplitude at most, so a line ten times the
+/// model's in amplitude is not the model's misfit).
+pub const MAINS_DRIVEN_SHARE: f64 = 0.01;
+/// Smallest RMS, in noise floors, a mains line must have to be taken out (our assumption:
+/// smaller, it moves a record's residual by under 3 %, and is left with a note's clutter
+/// spared).
+pub const MAINS_MIN_FLOORS: f64 = 0.25;
 
 /// Shortest run of constant input that counts as a hold, seconds (our assumption: long enough
 /// for a drift tail of 10-100 ms lags to show after the step's transient).

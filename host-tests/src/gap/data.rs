@@ -12,11 +12,11 @@
 //! ([`strided_floor`]).
 
 use super::constants::{
-    FAST_RATE_HZ, GAP_MIN_RATE_HZ, GAP_RATE_TOLERANCE, GLITCH_FLOORS, GLITCH_SPREAD_FLOORS,
-    HOLD_BAND_SIGMAS, JUMP_MIN_V, JUMP_RATIO, MIN_SAMPLES, NOISE_DECORRELATE_MAX_S,
-    NOISE_SIGNAL_SHARE, NOISE_STRIDE_GROWTH, NOISE_WALK_MIN_DIFFS, RECORD_BITS_MAX,
-    REST_ZERO_INPUT_V, REST_ZERO_MIN_S, REVERSAL_MIN_V, STEP_MIN_VALUES, STEP_TEXT_MIN_SPAN_V,
-    STEP_TEXT_SHARE,
+    FAST_RATE_HZ, GAP_MIN_RATE_HZ, GAP_RATE_TOLERANCE, GLITCH_FLOORS, GLITCH_RUN_MAX,
+    GLITCH_RUN_NEIGHBOURS, GLITCH_SPREAD_FLOORS, HOLD_BAND_SIGMAS, JUMP_MIN_V, JUMP_RATIO,
+    MIN_SAMPLES, NOISE_DECORRELATE_MAX_S, NOISE_SIGNAL_SHARE, NOISE_STRIDE_GROWTH,
+    NOISE_WALK_MIN_DIFFS, RECORD_BITS_MAX, REST_ZERO_INPUT_V, REST_ZERO_MIN_S, REVERSAL_MIN_V,
+    STEP_MIN_VALUES, STEP_TEXT_MIN_SPAN_V, STEP_TEXT_SHARE, SWAPPED_NOISE_RATIO,
 };
 use crate::io::csv::Record;
 use crate::io::model_file::ModelFile;
@@ -404,6 +404,24 @@ pub fn noise_floor_of(d: &Data, model_y: Option<&[f64]>) -> NoiseFloor {
     }
 }
 
+/// The noise of a record's input column where it looks like a sensor's reading beside an
+/// output that looks like a command (`y_floor` the output's [`noise_floor_of`]): the output
+/// shows no noise above its own rounding, and the input's floor, read the same way, is at
+/// least [`SWAPPED_NOISE_RATIO`] times the output's. No stage makes its output quieter than
+/// its input's noise: the columns are in each other's places. `None` otherwise.
+pub fn swapped_columns(d: &Data, y_floor: &NoiseFloor) -> Option<f64> {
+    if !y_floor.by_resolution {
+        return None;
+    }
+    let as_output = Data {
+        y_v: d.u_v.clone(),
+        ..d.clone()
+    };
+    let u_floor = noise_floor_of(&as_output, None);
+    (!u_floor.by_resolution && u_floor.sigma_v >= SWAPPED_NOISE_RATIO * y_floor.sigma_v)
+        .then_some(u_floor.sigma_v)
+}
+
 /// The record's resolution, volts: the smallest gap between two of its output's distinct
 /// values, and at least its output's span over `2^RECORD_BITS_MAX`. A record rounded by its
 /// converter (a scope's 8 or 12 bits, a 16-bit ADC) takes whole steps, and where its noise is
@@ -435,23 +453,25 @@ pub fn output_step_v(y: &[f64]) -> (f64, bool, f64) {
     (gap.max(finest), gap >= finest, gap)
 }
 
-/// Single-sample glitches of a record's output: samples at least `GLITCH_FLOORS` noise
-/// floors (or as many of the output's smallest steps, for a rounded record) off the median of
-/// their six neighbours (three each side) while those neighbours stay within
-/// `GLITCH_SPREAD_FLOORS` floors of it, in the record's residual from `model_y` (the base
-/// model's simulated output: a one-sample pulse of the input at 1 kHz, which the stage
-/// follows within the sample, is in the model's output too, and leaves no residual spike).
-/// Away from the input's edges nothing the stage does moves it so: a dynamics the model lacks
-/// (a mode) moves several samples, which spreads the neighbours, so this is the recording's
-/// (an ADC's or a logger's glitch), and one such sample in 50 000 moves a record's RMS by up
-/// to several floors. Samples within three of an input edge are left: there a delay or a
-/// slew limit the model lacks is a one-sample spike of the residual at 1 kHz (families cases
-/// 1022 and 1027, whose true delay went with it). Three neighbours a side, not two: a stage
-/// ringing at a third of the sampling rate (families case 1032, 12 mV at 6.3 kHz sampled at
-/// 19 kHz) repeats each phase every third sample, and with two a side one phase's samples
-/// stood alone among the other two's. Two glitches side by side spread each other's
-/// neighbours and are left. Returns each glitch's index and the value it is replaced by (the
-/// model's output there plus the neighbours' median residual).
+/// Glitches of a record's output: runs of one to `GLITCH_RUN_MAX` neighbouring samples,
+/// each at least `GLITCH_FLOORS` noise floors (or as many of the output's smallest steps, for
+/// a rounded record) off the median of the run's six neighbours (three each side) while those
+/// neighbours stay within `GLITCH_SPREAD_FLOORS` floors of it, in the record's residual from
+/// `model_y` (the base model's simulated output: a one-sample pulse of the input at 1 kHz,
+/// which the stage follows within the sample, is in the model's output too, and leaves no
+/// residual spike). Away from the input's edges nothing the stage does moves it so: a
+/// dynamics the model lacks (a mode) moves many samples and rings, which spreads the
+/// neighbours, so this is the recording's (an ADC's or a logger's glitch or burst), and one
+/// such sample in 50 000 moves a record's RMS by up to several floors. Samples within four of
+/// an input edge are left: there a delay or a slew limit the model lacks is a short spike of
+/// the residual at 1 kHz (families cases 1022 and 1027, whose true delay went with it). Three
+/// neighbours a side, not two: a stage ringing at a third of the sampling rate (families case
+/// 1032, 12 mV at 6.3 kHz sampled at 19 kHz) repeats each phase every third sample, and with
+/// two a side one phase's samples stood alone among the other two's. The shortest run that
+/// holds is taken. A longer run needs `GLITCH_RUN_NEIGHBOURS` quiet neighbours a side, and
+/// is measured from the straight line through them. Returns each glitch sample's index and
+/// the value it is replaced by (the model's output there plus what the neighbours' residual
+/// gives: their median, or their line).
 pub fn glitches(d: &Data, floor_v: f64, model_y: Option<&[f64]>) -> Vec<(usize, f64)> {
     let n = d.y_v.len();
     let mut out = Vec::new();
@@ -465,8 +485,8 @@ pub fn glitches(d: &Data, floor_v: f64, model_y: Option<&[f64]>) -> Vec<(usize, 
     };
     let (_, _, gap_v) = output_step_v(&d.y_v);
     let bar_v = GLITCH_FLOORS * floor_v.max(gap_v);
-    // (samples within three of an input edge are left: a delay or a slew limit the model
-    // lacks puts a one-sample spike in the residual at an edge sampled at 1 kHz)
+    // (samples within four of an input edge are left: a delay or a slew limit the model
+    // lacks puts a short spike in the residual at an edge sampled at 1 kHz)
     let mut near_edge = vec![false; n];
     for j in 1..n {
         if d.is_jump(j) {
@@ -475,22 +495,74 @@ pub fn glitches(d: &Data, floor_v: f64, model_y: Option<&[f64]>) -> Vec<(usize, 
             }
         }
     }
-    for i in 3..n - 3 {
-        if near_edge[i] {
+    // The run of `len` samples from `i`: what its neighbours say each of its samples should
+    // be, if they stay within the spread and every sample of the run is past the bar. One
+    // sample: the median of three neighbours a side. A longer run: the straight line through
+    // `GLITCH_RUN_NEIGHBOURS` a side (over twenty samples a slow residual's slope, a loop's
+    // at 1 Hz, moves a few floors).
+    let run = |i: usize, len: usize| -> Option<Vec<f64>> {
+        if len == 1 {
+            let mut nb = [r[i - 3], r[i - 2], r[i - 1], r[i + 1], r[i + 2], r[i + 3]];
+            nb.sort_by(f64::total_cmp);
+            let med = 0.5 * (nb[2] + nb[3]);
+            let spread = (nb[5] - med).max(med - nb[0]);
+            return (spread <= GLITCH_SPREAD_FLOORS * floor_v && (r[i] - med).abs() > bar_v)
+                .then(|| vec![med]);
+        }
+        let side = GLITCH_RUN_NEIGHBOURS;
+        if i < side || i + len + side > n {
+            return None;
+        }
+        let nb: Vec<(f64, f64)> = (i - side..i)
+            .chain(i + len..i + len + side)
+            .map(|j| (j as f64 - i as f64, r[j]))
+            .collect();
+        let k = nb.len() as f64;
+        let (mx, my) = nb
+            .iter()
+            .fold((0.0, 0.0), |(a, b), p| (a + p.0 / k, b + p.1 / k));
+        let sxx: f64 = nb.iter().map(|p| (p.0 - mx) * (p.0 - mx)).sum();
+        let slope = nb.iter().map(|p| (p.0 - mx) * (p.1 - my)).sum::<f64>() / sxx;
+        let line = |x: f64| my + slope * (x - mx);
+        let spread = nb
+            .iter()
+            .map(|p| (p.1 - line(p.0)).abs())
+            .fold(0.0, f64::max);
+        let want: Vec<f64> = (0..len).map(|j| line(j as f64)).collect();
+        (spread <= GLITCH_SPREAD_FLOORS * floor_v
+            && (0..len).all(|j| (r[i + j] - want[j]).abs() > bar_v))
+        .then_some(want)
+    };
+    let mut i = 3;
+    while i + 4 <= n {
+        // (a run's first sample is past the bar from what its neighbours give, which its
+        // left neighbour is within the spread (0.4 of the bar) and one step of their line
+        // of: a step of half the bar from that neighbour is needed where the residual moves
+        // less than a tenth of the bar a sample, and cheap to test first)
+        if (r[i] - r[i - 1]).abs() <= 0.5 * bar_v {
+            i += 1;
             continue;
         }
-        let mut nb = [r[i - 3], r[i - 2], r[i - 1], r[i + 1], r[i + 2], r[i + 3]];
-        nb.sort_by(f64::total_cmp);
-        let med = 0.5 * (nb[2] + nb[3]);
-        let spread = (nb[5] - med).max(med - nb[0]);
-        if (r[i] - med).abs() > bar_v && spread <= GLITCH_SPREAD_FLOORS * floor_v {
-            out.push((i, med + model_y.map_or(0.0, |s| s[i])));
+        let found = (1..=GLITCH_RUN_MAX)
+            .take_while(|&len| i + len + 3 <= n && !near_edge[i..i + len].iter().any(|&e| e))
+            .find_map(|len| run(i, len));
+        match found {
+            Some(want) => {
+                let len = want.len();
+                out.extend(
+                    (i..i + len)
+                        .zip(&want)
+                        .map(|(j, w)| (j, w + model_y.map_or(0.0, |s| s[j]))),
+                );
+                i += len;
+            }
+            None => i += 1,
         }
     }
     out
 }
 
-/// The record with its [`glitches`] replaced by their neighbours' median, the glitches, and
+/// The record with its [`glitches`] replaced by what their neighbours give, the glitches, and
 /// words for the table when there were any.
 pub fn without_glitches(
     d: &Data,
@@ -508,33 +580,42 @@ pub fn without_glitches(
         lo = lo.min(off);
         hi = hi.max(off);
     }
-    let at: Vec<String> = found
+    // (a glitch is a run of neighbouring samples: its first sample's time names it)
+    let mut runs: Vec<(usize, usize)> = Vec::new();
+    for &(i, _) in &found {
+        match runs.last_mut() {
+            Some((start, len)) if *start + *len == i => *len += 1,
+            _ => runs.push((i, 1)),
+        }
+    }
+    let longest = runs.iter().map(|r| r.1).max().unwrap_or(1);
+    let at: Vec<String> = runs
         .iter()
         .take(5)
         .map(|&(i, _)| format!("{:.4}", d.t_s[i]))
         .collect();
-    let (what, size) = if found.len() == 1 {
-        (
-            "1 single sample".to_string(),
-            format!("{:.1} mV off its neighbours, which stay", 1e3 * hi),
-        )
+    let what = match (runs.len(), longest) {
+        (1, 1) => "1 single sample".to_string(),
+        (1, l) => format!("1 run of {l} samples"),
+        (k, 1) => format!("{k} single samples"),
+        (k, l) => format!("{k} runs of 1-{l} samples"),
+    };
+    let size = if found.len() == 1 {
+        format!("{:.1} mV off its neighbours, which stay", 1e3 * hi)
     } else {
-        (
-            format!("{} single samples", found.len()),
-            format!(
-                "{:.1}-{:.1} mV off their neighbours, which each time stay",
-                1e3 * lo,
-                1e3 * hi
-            ),
+        format!(
+            "{:.1}-{:.1} mV off their neighbours, which each time stay",
+            1e3 * lo,
+            1e3 * hi
         )
     };
     let note = format!(
         "{}: {what} {size} within {GLITCH_SPREAD_FLOORS} noise floors, in the residual from \
-         the base model (t = {}{} s): a glitch of the recording, as no stage moves so in one \
-         sample; replaced by the neighbours' median",
+         the base model (t = {}{} s): a glitch of the recording, as no stage moves so in a \
+         few samples and back; replaced by what the neighbours give",
         d.name,
         at.join(", "),
-        if found.len() > 5 { ", ..." } else { "" }
+        if runs.len() > 5 { ", ..." } else { "" }
     );
     (c, found, Some(note))
 }
@@ -985,6 +1066,56 @@ mod tests {
             glitches(&d, sd, Some(&base)).is_empty(),
             "the delay's edges"
         );
+    }
+
+    /// Glitches of two and three samples (a logger's burst) are found as runs, each of their
+    /// samples replaced, and said as runs; a mode the model lacks, ringing at a fifth of the
+    /// sampling rate after each of a few kicks, is not a run of glitches (its half periods
+    /// are two or three samples long between quieter turns: families cases 1049 and 1096 were
+    /// so with three neighbours a side; the stage here is 1049's mode under steps).
+    #[test]
+    fn runs_of_a_few_samples_are_glitches_and_a_ring_is_not() {
+        let sine = |t: f64| 5.0 - 4.5 * (2.0 * std::f64::consts::PI * t).cos();
+        let (mut d, sd) = noisy_record(50e3, 1.0, 0.0, 0, sine);
+        let clean = d.y_v.clone();
+        let runs: [(usize, &[f64]); 3] = [
+            (10_000, &[0.5, 0.4]),
+            (25_000, &[-0.8, -0.7, -0.6]),
+            (40_000, &[1.2]),
+        ];
+        let mut want = Vec::new();
+        for &(i, vs) in &runs {
+            for (k, v) in vs.iter().enumerate() {
+                d.y_v[i + k] += v;
+                want.push(i + k);
+            }
+        }
+        let found: Vec<usize> = glitches(&d, sd, None).iter().map(|g| g.0).collect();
+        assert_eq!(found, want);
+        let (c, _, note) = without_glitches(&d, sd, None);
+        assert!(
+            note.as_ref()
+                .is_some_and(|n| n.contains("3 runs of 1-3 samples")
+                    && n.contains("t = 0.2000, 0.5000, 0.8000 s")),
+            "{note:?}"
+        );
+        for &i in &want {
+            assert!((c.y_v[i] - clean[i]).abs() < 5.0 * sd);
+        }
+        // (families case 1049's mode, 8.9 kHz, damping 0.05, under steps sampled at 50 kHz,
+        // against a model without it)
+        let mut truth = ModelFile::built_in("thesis-linear").unwrap();
+        truth.resonance = Some(crate::io::model_file::ResonanceSection {
+            mode_hz: 8946.0,
+            damping: 0.051,
+        });
+        let steps = |t: f64| 5.0 + 4.0 * ((t * 5.0).floor() * 2.3999).sin();
+        let (mut d, sd) = noisy_record(50e3, 2.0, 0.0, 0, steps);
+        let noise: Vec<f64> = d.y_v.iter().zip(&d.u_v).map(|(y, u)| y - u).collect();
+        let y = sim(&truth, &d).unwrap();
+        d.y_v = y.iter().zip(&noise).map(|(a, b)| a + b).collect();
+        let base = sim(&ModelFile::built_in("thesis-linear").unwrap(), &d).unwrap();
+        assert!(glitches(&d, sd, Some(&base)).is_empty(), "the ring");
     }
 
     /// A memo hit is the simulation itself; a changed model or a changed input is simulated

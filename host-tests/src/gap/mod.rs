@@ -65,6 +65,7 @@ pub mod data;
 pub mod demo;
 pub mod everett;
 pub mod fast_fit;
+pub mod mains;
 pub mod nnls;
 pub mod protocol;
 pub mod report;

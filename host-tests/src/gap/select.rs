@@ -18,10 +18,12 @@ use super::constants::{
     STATIC_TELL_RATIO, STOP_FLOOR_RATIO, STRUCTURE_ROUNDS,
 };
 use super::data::{
-    Data, NoiseFloor, min_max, mse, noise_floor_of, sim, simulate_all, without_glitches,
+    Data, NoiseFloor, min_max, mse, noise_floor_of, sim, simulate_all, swapped_columns,
+    without_glitches,
 };
 use super::everett::CentreLine;
 use super::fast_fit::fit_fast;
+use super::mains::{self, HumLine};
 use super::signatures::{self, shows_share};
 use super::slow_fit::{SlowRegressors, fit_slow, slow_regressors, solve_rows};
 use super::start;
@@ -97,12 +99,16 @@ pub struct Diagnosis {
     /// Noise floor of each record, volts.
     pub record_noise_v: Vec<f64>,
     /// For each record whose noise is coloured or below its resolution, how its floor was
-    /// found ([`super::data::NoiseFloor::note`]), and each record's single-sample glitches,
-    /// replaced before the fits ([`super::data::without_glitches`]).
+    /// found ([`super::data::NoiseFloor::note`]), each record's glitches, replaced before the
+    /// fits ([`super::data::without_glitches`]), and its mains interference, taken out before
+    /// them ([`super::mains::note`]).
     pub noise_notes: Vec<String>,
-    /// Each record's single-sample glitches, replaced before the fits: (sample index, value
-    /// it was replaced by) ([`super::data::glitches`]; [`Diagnosis::cleaned`] applies them).
+    /// Each record's glitches, replaced before the fits: (sample index, value it was
+    /// replaced by) ([`super::data::glitches`]; [`Diagnosis::cleaned`] applies them).
     pub glitches: Vec<Vec<(usize, f64)>>,
+    /// Each record's mains interference, taken out of its output after its glitches
+    /// ([`super::mains::mains_lines`]; [`Diagnosis::cleaned`] applies them).
+    pub hum: Vec<Vec<HumLine>>,
     /// Noise floor, volts (root of the mean of the records' variances).
     pub noise_floor_v: f64,
     /// Residual RMS of the final model, volts.
@@ -193,12 +199,15 @@ impl CentreChoice {
 }
 
 impl Diagnosis {
-    /// The records as the diagnosis read them: `data` with its glitches replaced (what its
-    /// residuals and plots are of).
+    /// The records as the diagnosis read them: `data` with its glitches replaced and its
+    /// mains interference taken out (what its residuals and plots are of).
     pub fn cleaned(&self, data: &[Data]) -> Vec<Data> {
         data.iter()
             .enumerate()
-            .map(|(r, d)| d.with_samples_replaced(self.glitches.get(r).map_or(&[], Vec::as_slice)))
+            .map(|(r, d)| {
+                let c = d.with_samples_replaced(self.glitches.get(r).map_or(&[], Vec::as_slice));
+                mains::subtract(&c, self.hum.get(r).map_or(&[], Vec::as_slice))
+            })
             .collect()
     }
 
@@ -621,6 +630,19 @@ pub fn diagnose(base: &ModelFile, data: &[Data], opts: &Options) -> anyhow::Resu
         .zip(data)
         .filter_map(|(f, d)| f.note(&d.name))
         .collect();
+    for (d, f) in data.iter().zip(&floors) {
+        if let Some(u_noise_v) = swapped_columns(d, f) {
+            bail!(
+                "record {}: its input column is noisy ({:.3} mV from sample to sample) and its \
+                 output column is not (nothing above its rounding, {:.3} mV): a sensor's reading \
+                 in the input's column and a command in the output's. Are u and y in each \
+                 other's columns? (--vars t=NAME,u=NAME,y=NAME names them)",
+                d.name,
+                1e3 * u_noise_v,
+                1e3 * f.sigma_v
+            );
+        }
+    }
     let var: Vec<f64> = noise.iter().map(|s| (s * s).max(1e-14)).collect();
     let noise_floor_v = (var.iter().sum::<f64>() / var.len() as f64).sqrt();
     // (single-sample glitches of the recording are replaced before anything is judged or
@@ -634,6 +656,20 @@ pub fn diagnose(base: &ModelFile, data: &[Data], opts: &Options) -> anyhow::Resu
             let (c, found, note) = without_glitches(d, f, Some(s));
             noise_notes.extend(note);
             glitches.push(found);
+            c
+        })
+        .collect();
+    // (then the mains' interference, on the residual without the glitches)
+    let mut hum = Vec::new();
+    let cleaned: Vec<Data> = cleaned
+        .iter()
+        .zip(&noise)
+        .zip(&base_sims)
+        .map(|((d, &f), s)| {
+            let lines = mains::mains_lines(d, f, s);
+            noise_notes.extend(mains::note(&d.name, &lines, f));
+            let c = mains::subtract(d, &lines);
+            hum.push(lines);
             c
         })
         .collect();
@@ -681,6 +717,7 @@ pub fn diagnose(base: &ModelFile, data: &[Data], opts: &Options) -> anyhow::Resu
         noise,
         noise_notes,
         glitches,
+        hum,
         var,
         noise_floor_v,
         u_range,
@@ -728,6 +765,7 @@ struct Setup<'a> {
     noise: Vec<f64>,
     noise_notes: Vec<String>,
     glitches: Vec<Vec<(usize, f64)>>,
+    hum: Vec<Vec<HumLine>>,
     var: Vec<f64>,
     noise_floor_v: f64,
     u_range: (f64, f64),
@@ -1696,6 +1734,7 @@ fn diagnose_split(
         record_noise_v: noise,
         noise_notes: setup.noise_notes.clone(),
         glitches: setup.glitches.clone(),
+        hum: setup.hum.clone(),
         noise_floor_v,
         final_rms_v,
         record_final_rms_v: cur_mse.iter().map(|m| m.sqrt()).collect(),
@@ -2247,6 +2286,7 @@ mod tests {
             record_noise_v: vec![1e-3],
             noise_notes: Vec::new(),
             glitches: Vec::new(),
+            hum: Vec::new(),
             noise_floor_v: 1e-3,
             final_rms_v: rms_v,
             record_final_rms_v: vec![rms_v],

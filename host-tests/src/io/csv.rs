@@ -267,7 +267,8 @@ fn check_values(v: &[f64], column: &str, at: fn(usize) -> At) -> Result<(), Reco
 }
 
 /// The field separator a header line uses: `,` if it has one, else `;` or a tab if it has
-/// one, else `,`.
+/// one, else a space (any run of blanks: a `.txt` or `.dat` column file as MATLAB's
+/// `writematrix` or a logger writes it) if it has one, else `,`.
 pub fn separator(header: &str) -> char {
     if header.contains(',') {
         ','
@@ -275,8 +276,29 @@ pub fn separator(header: &str) -> char {
         ';'
     } else if header.contains('\t') {
         '\t'
+    } else if header.contains(' ') {
+        ' '
     } else {
         ','
+    }
+}
+
+/// A line's fields under separator `sep` (a space: any run of blanks), trimmed.
+fn fields_of(s: &str, sep: char) -> Vec<&str> {
+    if sep == ' ' {
+        s.split_whitespace().collect()
+    } else {
+        s.split(sep).map(str::trim).collect()
+    }
+}
+
+/// A field as a number: a decimal comma is read as a point where the separator is not a
+/// comma.
+fn number_of(text: &str, sep: char) -> Option<f64> {
+    if sep != ',' && text.contains(',') {
+        text.replacen(',', ".", 1).parse().ok()
+    } else {
+        text.parse().ok()
     }
 }
 
@@ -438,6 +460,7 @@ impl Record {
         // in locales with a decimal comma export), where a decimal comma is then read as a
         // point.
         let mut sep = ',';
+        let mut units_skipped = false;
         for (k, raw) in text.lines().enumerate() {
             let line = k + 1;
             let s = raw.trim();
@@ -447,7 +470,7 @@ impl Record {
             if header.is_none() {
                 sep = separator(s);
             }
-            let fields: Vec<&str> = s.split(sep).map(str::trim).collect();
+            let fields: Vec<&str> = fields_of(s, sep);
             match &header {
                 None => {
                     let names: Vec<String> = fields
@@ -476,6 +499,20 @@ impl Record {
                     header = Some((line, names));
                 }
                 Some((_, names)) => {
+                    // A units row under the header (`s,V,V`, as loggers and spreadsheets
+                    // write one): the first row, where none of the columns read is a number.
+                    let wanted = [Some(it), Some(iu), iy, ir];
+                    if lines.is_empty()
+                        && !units_skipped
+                        && wanted.iter().flatten().all(|&i| {
+                            fields
+                                .get(i)
+                                .is_some_and(|f| !f.is_empty() && number_of(f, sep).is_none())
+                        })
+                    {
+                        units_skipped = true;
+                        continue;
+                    }
                     if fields.len() != names.len() {
                         return Err(RecordError::FieldCount {
                             line,
@@ -483,23 +520,16 @@ impl Record {
                             expected: names.len(),
                         });
                     }
-                    let wanted = [Some(it), Some(iu), iy, ir];
                     for (c, idx) in wanted.iter().enumerate() {
                         let Some(idx) = *idx else { continue };
                         let text = fields.get(idx).copied().unwrap_or("");
                         let column = names.get(idx).cloned().unwrap_or_default();
-                        let point;
-                        let number = if sep != ',' && text.contains(',') {
-                            point = text.replacen(',', ".", 1);
-                            point.as_str()
-                        } else {
-                            text
-                        };
-                        let v: f64 = number.parse().map_err(|_| RecordError::NotANumber {
-                            line,
-                            column: column.clone(),
-                            text: truncate(text),
-                        })?;
+                        let v: f64 =
+                            number_of(text, sep).ok_or_else(|| RecordError::NotANumber {
+                                line,
+                                column: column.clone(),
+                                text: truncate(text),
+                            })?;
                         if !v.is_finite() {
                             return Err(RecordError::NotFinite {
                                 at: At::Line(line),
