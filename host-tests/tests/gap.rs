@@ -1653,6 +1653,67 @@ fn a_record_in_milliseconds_or_with_a_reversed_sign_is_refused_clearly() {
     );
 }
 
+/// A sensor that is not there or not in range, refused with words that say which: one
+/// unplugged (the output is its own 1 mV of noise: before, a false `hysteresis` at 2767x the
+/// floor), and one clipped by its logger at 7 V, below the stage's top (before: nothing named,
+/// 24.8x the floor, an `unexplained` part at the top of the input). A clean record of the
+/// same stage is not refused, nor one held at its top level and rounded by a coarse (8-bit)
+/// converter: at the sine's bottom and in the hold its output reads one code for hundreds of
+/// samples, and the model's output moves less than a code there.
+#[test]
+fn a_disconnected_or_clipped_sensor_is_refused_clearly() {
+    let (truth, t, u, y) = clean_thesis_sine(2.0);
+    let noise: Vec<f64> = host_tests::testing::filtered_noise(t.len(), 5e3, 0.0, 0, 5)
+        .iter()
+        .map(|w| 1e-3 * w)
+        .collect();
+    let one = |name: &str, y: Vec<f64>| {
+        vec![
+            Data::from_record(
+                name,
+                Record::new(t.clone(), u.clone(), Some(y), None).unwrap(),
+            )
+            .unwrap(),
+        ]
+    };
+    let err = refusal(&truth, &one("unplugged.csv", noise));
+    assert!(
+        err.contains("unplugged.csv")
+            && err.contains("does not follow")
+            && err.contains("connected"),
+        "{err}"
+    );
+    let clipped: Vec<f64> = y.iter().map(|v| v.min(7.0)).collect();
+    let err = refusal(&truth, &one("clipped.csv", clipped));
+    assert!(
+        err.contains("clipped.csv")
+            && err.contains("exactly 7.0000 V")
+            && err.contains("clipped at its range"),
+        "{err}"
+    );
+    assert_eq!(refusal(&truth, &one("clean.csv", y.clone())), "");
+    // (held at 9 V for a second after the sine, rounded to 8 bits of 10 V: one code)
+    let (mut th, mut uh, mut yh) = (t.clone(), u.clone(), y.clone());
+    let stage = truth.build_stage().unwrap();
+    let dt = t[1] - t[0];
+    for i in 0..5_000 {
+        th.push(t[t.len() - 1] + (i + 1) as f64 * dt);
+        uh.push(9.0);
+    }
+    let yfull = simulate(&stage, truth.period_s, &th, &uh);
+    yh.extend_from_slice(&yfull[t.len()..]);
+    let step = 10.0 / 256.0;
+    let rounded: Vec<f64> = yh.iter().map(|v| (v / step).round() * step).collect();
+    let data = vec![
+        Data::from_record(
+            "held.csv",
+            Record::new(th, uh, Some(rounded), None).unwrap(),
+        )
+        .unwrap(),
+    ];
+    assert_eq!(refusal(&truth, &data), "");
+}
+
 /// A lab's own CSV header (`time_s;input_V;sensor_V`, semicolons) is read through `--vars`,
 /// and without it the refusal names the columns found and the flag; the same record diagnoses
 /// as under the house header.

@@ -91,6 +91,21 @@ pub const SCALE_APART_MAX: f64 = 5.0;
 /// record of the families or hidden-effect suites is refused).
 pub const SWAPPED_NOISE_RATIO: f64 = 3.0;
 
+/// A record whose output's correlation with the model's simulated output is within this of
+/// zero, where the model's output moves `REVERSED_MIN_FLOORS` noise floors, is refused as one
+/// whose output does not follow its input (our assumption: every catalogued effect, and
+/// every suite's truth, keeps the correlation above 0.9; a disconnected sensor reads its
+/// noise, 0, and a column of another signal near it).
+pub const FOLLOW_MIN_CORRELATION: f64 = 0.5;
+/// Samples at which a record's output reads exactly its extreme value, beyond which, where the
+/// model's output moves `REVERSED_MIN_FLOORS` noise floors over them, the record is refused as
+/// clipped by its sensor or logger (our assumption: a hundred equal readings, or 0.5 % of the
+/// record if more, are no chance of a noisy output, and a held input whose output is rounded
+/// to one code leaves the model's output still there too).
+pub const CLIP_MIN_SAMPLES: usize = 100;
+/// ... as a share of the record's samples, where that is more.
+pub const CLIP_MIN_SHARE: f64 = 0.005;
+
 /// Slowest sampling a record may have, Hz (issue #12: records of any rate from 1 kHz; slower,
 /// the stage's millisecond dynamics and its edges fall between samples, and the simulation's
 /// held input is a staircase the stage never saw). A record whose time column is in

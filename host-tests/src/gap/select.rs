@@ -11,11 +11,12 @@
 
 use super::catalogue::{self, EFFECTS, FAST, SLOW};
 use super::constants::{
-    CANDIDATE_ROUNDS, CANNOT_TELL_RATIO, CREEP_START_MIN_FLOORS, CREEP_START_SHARE, HOLD_MIN_S,
-    MAX_STEPS, MIN_EXPLAINED, OCCAM_SWAP_RATIO, PAIR_FLOOR_RATIO, PRUNE_KEEP_EXCESS_VAR,
-    PRUNE_PER_PARAM, PRUNE_RATIO, REST_ZERO_INPUT_V, REST_ZERO_SHOWN_MIN, REST_ZERO_SIGMAS,
-    REVERSED_CORRELATION, REVERSED_MIN_FLOORS, RISE_CHOICE_RATIO, SCALE_APART_MAX,
-    STATIC_TELL_RATIO, STOP_FLOOR_RATIO, STRUCTURE_ROUNDS,
+    CANDIDATE_ROUNDS, CANNOT_TELL_RATIO, CLIP_MIN_SAMPLES, CLIP_MIN_SHARE, CREEP_START_MIN_FLOORS,
+    CREEP_START_SHARE, FOLLOW_MIN_CORRELATION, HOLD_MIN_S, MAX_STEPS, MIN_EXPLAINED,
+    OCCAM_SWAP_RATIO, PAIR_FLOOR_RATIO, PRUNE_KEEP_EXCESS_VAR, PRUNE_PER_PARAM, PRUNE_RATIO,
+    REST_ZERO_INPUT_V, REST_ZERO_SHOWN_MIN, REST_ZERO_SIGMAS, REVERSED_CORRELATION,
+    REVERSED_MIN_FLOORS, RISE_CHOICE_RATIO, SCALE_APART_MAX, STATIC_TELL_RATIO, STOP_FLOOR_RATIO,
+    STRUCTURE_ROUNDS,
 };
 use super::data::{
     Data, NoiseFloor, min_max, mse, noise_floor_of, sim, simulate_all, swapped_columns,
@@ -557,6 +558,36 @@ fn scale_apart(y: &[f64], sim: &[f64], floor_v: f64) -> Option<f64> {
     .then_some(k)
 }
 
+/// The correlation of a record's output `y` with the model's simulated output `sim`, where
+/// it is within `FOLLOW_MIN_CORRELATION` of zero while the simulation moves more than
+/// `REVERSED_MIN_FLOORS` noise floors: a record whose output does not follow its input (a
+/// disconnected sensor, another signal's column). `None` otherwise.
+fn not_following(y: &[f64], sim: &[f64], floor_v: f64) -> Option<f64> {
+    let m = OnModel::of(y, sim)?;
+    (m.sd_sim_v > REVERSED_MIN_FLOORS * floor_v && m.correlation.abs() < FOLLOW_MIN_CORRELATION)
+        .then_some(m.correlation)
+}
+
+/// A record's output clipped by its sensor or logger: the extreme value (volts) its output
+/// reads exactly at `CLIP_MIN_SAMPLES` samples or more (`CLIP_MIN_SHARE` of the record where
+/// that is more), how many, and how far the model's simulated output `sim` moves over them
+/// (more than `REVERSED_MIN_FLOORS` noise floors `floor_v`: the model's output moves on where
+/// the record's stands). `None` otherwise.
+fn clipped(y: &[f64], sim: &[f64], floor_v: f64) -> Option<(f64, usize, f64)> {
+    let n = y.len().min(sim.len());
+    let need = CLIP_MIN_SAMPLES.max((CLIP_MIN_SHARE * n as f64).ceil() as usize);
+    let (lo, hi) = min_max(&y[..n]);
+    [hi, lo].into_iter().find_map(|level| {
+        let at: Vec<f64> = (0..n).filter(|&i| y[i] == level).map(|i| sim[i]).collect();
+        let (slo, shi) = min_max(&at);
+        (at.len() >= need && shi - slo > REVERSED_MIN_FLOORS * floor_v).then_some((
+            level,
+            at.len(),
+            shi - slo,
+        ))
+    })
+}
+
 /// A record's output against the model's simulated output: the slope of the one on the other,
 /// their correlation, and how far the simulation moves (standard deviation, volts).
 struct OnModel {
@@ -675,6 +706,27 @@ pub fn diagnose(base: &ModelFile, data: &[Data], opts: &Options) -> anyhow::Resu
         .collect();
     let data: &[Data] = &cleaned;
     for ((d, s), f) in data.iter().zip(&base_sims).zip(&noise) {
+        if let Some((level, count, span)) = clipped(&d.y_v, s, *f) {
+            bail!(
+                "record {}: its output reads exactly {level:.4} V at {count} samples ({:.1} % \
+                 of the record) while the model's output moves {:.1} mV over them: the sensor \
+                 or the logger clipped at its range. The workflow fits the stage, not a clipped \
+                 recording: record within the range, or leave the clipped part out",
+                d.name,
+                100.0 * count as f64 / d.len() as f64,
+                1e3 * span
+            );
+        }
+        if let Some(c) = not_following(&d.y_v, s, *f) {
+            bail!(
+                "record {}: its output does not follow the model's (correlation {c:.2} between \
+                 the record's y and the model's simulated output, which moves {:.1} mV): is the \
+                 sensor connected, and is y its column? The workflow names small departures \
+                 from the model",
+                d.name,
+                1e3 * OnModel::of(&d.y_v, s).map_or(0.0, |m| m.sd_sim_v)
+            );
+        }
         if let Some(c) = moves_against(&d.y_v, s, *f) {
             bail!(
                 "record {}: its output moves against the model's (correlation {c:.2} between the \
