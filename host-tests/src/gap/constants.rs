@@ -278,13 +278,13 @@ pub const GLITCH_SPREAD_FLOORS: f64 = 4.0;
 /// periods, and a delay or a slew limit the model lacks sits at an input's edge, which the
 /// rule leaves).
 pub const GLITCH_RUN_MAX: usize = 3;
-/// Neighbours each side of a run of two or more glitch samples in which the residual must not
-/// ring (no second difference past `GLITCH_SPREAD_FLOORS` of white noise's; `super::data::
-/// glitches`). A mode the model lacks, ringing at a fifth of the sampling rate, has half
-/// periods of two or three samples, and three neighbours a side could sit in its quieter
-/// turns (families cases 1049 and 1096, at 8.9 kHz sampled at 50 kHz and 3.1 kHz at 15 kHz,
-/// had runs flagged so); ten a side span two of its periods and more (our assumption: a
-/// glitch is one event in a quiet stretch, while a ring lasts several periods).
+/// Neighbours each side a run of two or more glitch samples must have quiet (within
+/// `GLITCH_SPREAD_FLOORS` of their median; `super::data::glitches`). A mode the model lacks,
+/// ringing at a fifth of the sampling rate, has half periods of two or three samples, and
+/// three neighbours a side could sit in its quieter turns (families cases 1049 and 1096, at
+/// 8.9 kHz sampled at 50 kHz and 3.1 kHz at 15 kHz); ten a side span two of its periods and
+/// more (our assumption: a glitch is one event in a quiet stretch, while a ring lasts several
+/// periods).
 pub const GLITCH_RUN_NEIGHBOURS: usize = 10;
 
 /// Longest stretch of a record over which mains interference is taken as one frequency,

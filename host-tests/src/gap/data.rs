@@ -468,12 +468,10 @@ pub fn output_step_v(y: &[f64]) -> (f64, bool, f64) {
 /// neighbours a side, not two: a stage ringing at a third of the sampling rate (families case
 /// 1032, 12 mV at 6.3 kHz sampled at 19 kHz) repeats each phase every third sample, and with
 /// two a side one phase's samples stood alone among the other two's. The shortest run that
-/// holds is taken. A longer run is measured from the quadratic through three neighbours a
-/// side (a slow residual, a 50 Hz hum at 1 kHz, bends across it), and needs no ringing within
-/// `GLITCH_RUN_NEIGHBOURS` a side (no second difference past 4 of white noise's standard
-/// deviations). Returns each glitch sample's index and the value it is replaced by (the
-/// model's output there plus what the neighbours' residual gives: their median, or their
-/// quadratic).
+/// holds is taken. A longer run needs `GLITCH_RUN_NEIGHBOURS` quiet neighbours a side, and
+/// is measured from the straight line through them. Returns each glitch sample's index and
+/// the value it is replaced by (the model's output there plus what the neighbours' residual
+/// gives: their median, or their line).
 pub fn glitches(d: &Data, floor_v: f64, model_y: Option<&[f64]>) -> Vec<(usize, f64)> {
     let n = d.y_v.len();
     let mut out = Vec::new();
@@ -499,8 +497,9 @@ pub fn glitches(d: &Data, floor_v: f64, model_y: Option<&[f64]>) -> Vec<(usize, 
     }
     // The run of `len` samples from `i`: what its neighbours say each of its samples should
     // be, if they stay within the spread and every sample of the run is past the bar. One
-    // sample: the median of three neighbours a side. A longer run: their quadratic, where
-    // `GLITCH_RUN_NEIGHBOURS` a side do not ring.
+    // sample: the median of three neighbours a side. A longer run: the straight line through
+    // `GLITCH_RUN_NEIGHBOURS` a side (over twenty samples a slow residual's slope, a loop's
+    // at 1 Hz, moves a few floors).
     let run = |i: usize, len: usize| -> Option<Vec<f64>> {
         if len == 1 {
             let mut nb = [r[i - 3], r[i - 2], r[i - 1], r[i + 1], r[i + 2], r[i + 3]];
@@ -514,28 +513,22 @@ pub fn glitches(d: &Data, floor_v: f64, model_y: Option<&[f64]>) -> Vec<(usize, 
         if i < side || i + len + side > n {
             return None;
         }
-        // (no ringing on either side: a mode the model lacks rings for several periods, and
-        // its second differences are its own size where white noise's are sqrt 6 of it)
-        let ring_bar = GLITCH_SPREAD_FLOORS * 6f64.sqrt() * floor_v;
-        let rings = |w: &[f64]| {
-            w.windows(3)
-                .any(|x| (x[0] - 2.0 * x[1] + x[2]).abs() > ring_bar)
-        };
-        if rings(&r[i - side..i]) || rings(&r[i + len..i + len + side]) {
-            return None;
-        }
-        // (the quadratic through three neighbours a side: what a slow residual, a 50 Hz line
-        // at 1 kHz among them, does across the run)
-        let nb: Vec<(f64, f64)> = (i - 3..i)
-            .chain(i + len..i + len + 3)
+        let nb: Vec<(f64, f64)> = (i - side..i)
+            .chain(i + len..i + len + side)
             .map(|j| (j as f64 - i as f64, r[j]))
             .collect();
-        let fit = quadratic_through(&nb)?;
+        let k = nb.len() as f64;
+        let (mx, my) = nb
+            .iter()
+            .fold((0.0, 0.0), |(a, b), p| (a + p.0 / k, b + p.1 / k));
+        let sxx: f64 = nb.iter().map(|p| (p.0 - mx) * (p.0 - mx)).sum();
+        let slope = nb.iter().map(|p| (p.0 - mx) * (p.1 - my)).sum::<f64>() / sxx;
+        let line = |x: f64| my + slope * (x - mx);
         let spread = nb
             .iter()
-            .map(|p| (p.1 - fit(p.0)).abs())
+            .map(|p| (p.1 - line(p.0)).abs())
             .fold(0.0, f64::max);
-        let want: Vec<f64> = (0..len).map(|j| fit(j as f64)).collect();
+        let want: Vec<f64> = (0..len).map(|j| line(j as f64)).collect();
         (spread <= GLITCH_SPREAD_FLOORS * floor_v
             && (0..len).all(|j| (r[i + j] - want[j]).abs() > bar_v))
         .then_some(want)
@@ -567,20 +560,6 @@ pub fn glitches(d: &Data, floor_v: f64, model_y: Option<&[f64]>) -> Vec<(usize, 
         }
     }
     out
-}
-
-/// The least-squares quadratic through the points `(x, y)`, as a function of `x`; `None`
-/// where the points do not fix one (fewer than three distinct `x`).
-fn quadratic_through(points: &[(f64, f64)]) -> Option<impl Fn(f64) -> f64> {
-    let mut g = nalgebra::Matrix3::<f64>::zeros();
-    let mut v = nalgebra::Vector3::<f64>::zeros();
-    for &(x, y) in points {
-        let b = nalgebra::Vector3::new(1.0, x, x * x);
-        g += b * b.transpose();
-        v += b * y;
-    }
-    let c = g.lu().solve(&v)?;
-    Some(move |x: f64| c[0] + c[1] * x + c[2] * x * x)
 }
 
 /// The record with its [`glitches`] replaced by what their neighbours give, the glitches, and
