@@ -1657,7 +1657,9 @@ fn a_record_in_milliseconds_or_with_a_reversed_sign_is_refused_clearly() {
 /// unplugged (the output is its own 1 mV of noise: before, a false `hysteresis` at 2767x the
 /// floor), and one clipped by its logger at 7 V, below the stage's top (before: nothing named,
 /// 24.8x the floor, an `unexplained` part at the top of the input). A clean record of the
-/// same stage is not refused, nor one held at its top level and rounded by a coarse (8-bit)
+/// same stage is not refused, nor one 16 ms late and rounded to 8 bits (its top code at 4 %
+/// of the samples, where the model's output moves), nor one held at its top level and rounded
+/// by a coarse (8-bit)
 /// converter: at the sine's bottom and in the hold its output reads one code for hundreds of
 /// samples, and the model's output moves less than a code there.
 #[test]
@@ -1692,6 +1694,15 @@ fn a_disconnected_or_clipped_sensor_is_refused_clearly() {
         "{err}"
     );
     assert_eq!(refusal(&truth, &one("clean.csv", y.clone())), "");
+    // (an output 16 ms late, as a loop lags, rounded to 8 bits over 9 V: its top code holds
+    // 4 % of the samples while the model's output moves 0.1 V over them, but the record's
+    // line on the model stays within a code of it)
+    let code = 9.0 / 256.0;
+    let late: Vec<f64> = (0..y.len())
+        .map(|i| (y[i.saturating_sub(80)] / code).round() * code)
+        .collect();
+    let err = refusal(&truth, &one("late.csv", late));
+    assert!(!err.contains("clipped"), "{err}");
     // (held at 9 V for a second after the sine, rounded to 8 bits of 10 V: one code)
     let (mut th, mut uh, mut yh) = (t.clone(), u.clone(), y.clone());
     let stage = truth.build_stage().unwrap();

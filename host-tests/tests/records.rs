@@ -136,8 +136,10 @@ fn semicolon_and_tab_separated_records_read_with_decimal_commas() {
     assert!(e.contains("line 3") && e.contains("`s`"), "{e}");
     let e = err("t,u,y\n0,0.5,0.25\ns,V,V\n");
     assert!(e.contains("line 3"), "{e}");
-    // A row with one number among text is no units row.
+    // A row with one number among text is no units row, nor a row of missing values.
     let e = err("t,u,y\ns,1,V\n0,0.5,0.25\n");
+    assert!(e.contains("line 2"), "{e}");
+    let e = err("t,u,y\nNA,NA,NA\n0,0.5,0.25\n");
     assert!(e.contains("line 2"), "{e}");
 }
 

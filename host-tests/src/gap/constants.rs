@@ -84,19 +84,22 @@ pub const REVERSED_MIN_FLOORS: f64 = 10.0;
 /// mV, um or nm for V).
 pub const SCALE_APART_MAX: f64 = 5.0;
 
-/// A record whose output shows no noise above its own rounding while its input is this many
-/// times noisier than the output's floor is refused as one whose columns are swapped (our
-/// assumption: a command logged as the input is exact or a converter's rounding, a sensor's
-/// reading carries its noise, and a stage filters its input's noise, never adds to it; no
-/// record of the families or hidden-effect suites is refused).
+/// A record whose output shows no noise above its own rounding while its input, each as a
+/// share of its column's span, is this many times noisier is refused as one whose columns are
+/// swapped (our assumption: a command logged as the input is exact or a converter's rounding,
+/// a sensor's reading carries its noise; an input measured with 1 mV of noise over 9 V beside
+/// a 12-bit scope's output is 1.1 times the output's share, a sensor's reading as the input
+/// beside a float command as the output 32 times; no record of the families or hidden-effect
+/// suites is refused).
 pub const SWAPPED_NOISE_RATIO: f64 = 3.0;
 
 /// A record whose output's correlation with the model's simulated output is within this of
 /// zero, where the model's output moves `REVERSED_MIN_FLOORS` noise floors, is refused as one
-/// whose output does not follow its input (our assumption: every catalogued effect, and
-/// every suite's truth, keeps the correlation above 0.9; a disconnected sensor reads its
+/// whose output does not follow its input (our assumption: every suite's truth keeps the
+/// correlation above 0.9, but a chirp dwelling near a mode the model lacks, ten times the
+/// model's response and in quadrature, could bring it to 0.3; a disconnected sensor reads its
 /// noise, 0, and a column of another signal near it).
-pub const FOLLOW_MIN_CORRELATION: f64 = 0.5;
+pub const FOLLOW_MIN_CORRELATION: f64 = 0.2;
 /// Samples at which a record's output reads exactly its extreme value, beyond which, where the
 /// model's output moves `REVERSED_MIN_FLOORS` noise floors over them, the record is refused as
 /// clipped by its sensor or logger (our assumption: a hundred equal readings, or 0.5 % of the
@@ -318,6 +321,19 @@ pub const MAINS_DRIVEN_SHARE: f64 = 0.01;
 /// smaller, it moves a record's residual by under 3 %, and is left with a note's clutter
 /// spared).
 pub const MAINS_MIN_FLOORS: f64 = 0.25;
+/// Input harmonics a mains line must stay clear of (`super::mains`; our assumption: an effect
+/// the model lacks, a curvature or a loop, drives the input's low harmonics, a 25 Hz sine's
+/// second at 50 Hz, with no neighbour as strong; higher harmonics of a slow input stand among
+/// neighbours as strong, which the line ratio sees).
+pub const MAINS_INPUT_HARMONICS: usize = 10;
+/// The band around a mains line its surroundings are read from, beyond the window's main lobe,
+/// Hz (`super::mains`; our assumption: narrower than the 10 Hz between a 50 Hz grid's line and
+/// a 60 Hz one's harmonics, wide enough for a few hundred bins over 10 s).
+pub const MAINS_AROUND_HZ: f64 = 5.0;
+/// How far, as a factor either way, a line's amplitude in each half of its segment may stand
+/// from the whole segment's (`super::mains`; our assumption: a grid's hum holds its amplitude
+/// within tens of per cent over seconds, a ring dies by a factor of ten).
+pub const MAINS_HALVES_RATIO: f64 = 2.0;
 
 /// Shortest run of constant input that counts as a hold, seconds (our assumption: long enough
 /// for a drift tail of 10-100 ms lags to show after the step's transient).

@@ -407,8 +407,8 @@ pub fn noise_floor_of(d: &Data, model_y: Option<&[f64]>) -> NoiseFloor {
 /// The noise of a record's input column where it looks like a sensor's reading beside an
 /// output that looks like a command (`y_floor` the output's [`noise_floor_of`]): the output
 /// shows no noise above its own rounding, and the input's floor, read the same way, is at
-/// least [`SWAPPED_NOISE_RATIO`] times the output's. No stage makes its output quieter than
-/// its input's noise: the columns are in each other's places. `None` otherwise.
+/// least [`SWAPPED_NOISE_RATIO`] times the output's, each as a share of its column's span: a
+/// sensor's reading in the input's column and a command in the output's. `None` otherwise.
 pub fn swapped_columns(d: &Data, y_floor: &NoiseFloor) -> Option<f64> {
     if !y_floor.by_resolution {
         return None;
@@ -418,8 +418,17 @@ pub fn swapped_columns(d: &Data, y_floor: &NoiseFloor) -> Option<f64> {
         ..d.clone()
     };
     let u_floor = noise_floor_of(&as_output, None);
-    (!u_floor.by_resolution && u_floor.sigma_v >= SWAPPED_NOISE_RATIO * y_floor.sigma_v)
-        .then_some(u_floor.sigma_v)
+    // (each column's noise as a share of its span: the input and the output need not share
+    // a scale)
+    let span = |v: &[f64]| {
+        let (lo, hi) = min_max(v);
+        (hi - lo).max(1e-12)
+    };
+    let (u_share, y_share) = (
+        u_floor.sigma_v / span(&d.u_v),
+        y_floor.sigma_v / span(&d.y_v),
+    );
+    (!u_floor.by_resolution && u_share >= SWAPPED_NOISE_RATIO * y_share).then_some(u_floor.sigma_v)
 }
 
 /// The record's resolution, volts: the smallest gap between two of its output's distinct
@@ -462,8 +471,8 @@ pub fn output_step_v(y: &[f64]) -> (f64, bool, f64) {
 /// residual spike). Away from the input's edges nothing the stage does moves it so: a
 /// dynamics the model lacks (a mode) moves many samples and rings, which spreads the
 /// neighbours, so this is the recording's (an ADC's or a logger's glitch or burst), and one
-/// such sample in 50 000 moves a record's RMS by up to several floors. Samples within four of
-/// an input edge are left: there a delay or a slew limit the model lacks is a short spike of
+/// such sample in 50 000 moves a record's RMS by up to several floors. Samples from four
+/// before an input edge to three after it are left: there a delay or a slew limit the model lacks is a short spike of
 /// the residual at 1 kHz (families cases 1022 and 1027, whose true delay went with it). Three
 /// neighbours a side, not two: a stage ringing at a third of the sampling rate (families case
 /// 1032, 12 mV at 6.3 kHz sampled at 19 kHz) repeats each phase every third sample, and with
@@ -529,17 +538,22 @@ pub fn glitches(d: &Data, floor_v: f64, model_y: Option<&[f64]>) -> Vec<(usize, 
             .map(|p| (p.1 - line(p.0)).abs())
             .fold(0.0, f64::max);
         let want: Vec<f64> = (0..len).map(|j| line(j as f64)).collect();
-        (spread <= GLITCH_SPREAD_FLOORS * floor_v
-            && (0..len).all(|j| (r[i + j] - want[j]).abs() > bar_v))
-        .then_some(want)
+        // (one way: a delay the model lacks under a one-sample input pulse leaves a doublet,
+        // one sample each way, which is the stage's)
+        let off: Vec<f64> = (0..len).map(|j| r[i + j] - want[j]).collect();
+        let one_way = off.iter().all(|&o| o > 0.0) || off.iter().all(|&o| o < 0.0);
+        (spread <= GLITCH_SPREAD_FLOORS * floor_v && one_way && off.iter().all(|o| o.abs() > bar_v))
+            .then_some(want)
     };
     let mut i = 3;
     while i + 4 <= n {
         // (a run's first sample is past the bar from what its neighbours give, which its
         // left neighbour is within the spread (0.4 of the bar) and one step of their line
-        // of: a step of half the bar from that neighbour is needed where the residual moves
-        // less than a tenth of the bar a sample, and cheap to test first)
-        if (r[i] - r[i - 1]).abs() <= 0.5 * bar_v {
+        // of: a step of half the bar from that neighbour, or from the line through its two
+        // left neighbours where the residual slopes, is needed, and cheap to test first)
+        if (r[i] - r[i - 1]).abs() <= 0.5 * bar_v
+            && (r[i] - 2.0 * r[i - 1] + r[i - 2]).abs() <= 0.5 * bar_v
+        {
             i += 1;
             continue;
         }
@@ -1069,7 +1083,8 @@ mod tests {
     }
 
     /// Glitches of two and three samples (a logger's burst) are found as runs, each of their
-    /// samples replaced, and said as runs; a mode the model lacks, ringing at a fifth of the
+    /// samples replaced, and said as runs; a doublet (one sample each way) is not; a mode the
+    /// model lacks, ringing at a fifth of the
     /// sampling rate after each of a few kicks, is not a run of glitches (its half periods
     /// are two or three samples long between quieter turns: families cases 1049 and 1096 were
     /// so with three neighbours a side; the stage here is 1049's mode under steps).
@@ -1102,6 +1117,12 @@ mod tests {
         for &i in &want {
             assert!((c.y_v[i] - clean[i]).abs() < 5.0 * sd);
         }
+        // (a doublet, one sample each way: a delay the model lacks under a one-sample input
+        // pulse leaves one, which is the stage's)
+        let (mut d, sd) = noisy_record(50e3, 1.0, 0.0, 0, sine);
+        d.y_v[20_000] += 0.5;
+        d.y_v[20_001] -= 0.5;
+        assert!(glitches(&d, sd, None).is_empty(), "the doublet");
         // (families case 1049's mode, 8.9 kHz, damping 0.05, under steps sampled at 50 kHz,
         // against a model without it)
         let mut truth = ModelFile::built_in("thesis-linear").unwrap();

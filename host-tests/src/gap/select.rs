@@ -570,22 +570,33 @@ fn not_following(y: &[f64], sim: &[f64], floor_v: f64) -> Option<f64> {
 
 /// A record's output clipped by its sensor or logger: the extreme value (volts) its output
 /// reads exactly at `CLIP_MIN_SAMPLES` samples or more (`CLIP_MIN_SHARE` of the record where
-/// that is more), how many, and how far the model's simulated output `sim` moves over them
-/// (more than `REVERSED_MIN_FLOORS` noise floors `floor_v`: the model's output moves on where
-/// the record's stands). `None` otherwise.
+/// that is more), how many, and how far past it the record's own line on the model's output
+/// (`y = a + b sim`, fitted over the record) goes over them: more than `REVERSED_MIN_FLOORS`
+/// noise floors `floor_v` (the model says the output went on where the record stands). A
+/// coarse converter's one code at a sine's top, or an output that lags the model there (a
+/// loop), keeps the line within a code or two of the level. `None` otherwise.
 fn clipped(y: &[f64], sim: &[f64], floor_v: f64) -> Option<(f64, usize, f64)> {
     let n = y.len().min(sim.len());
     let need = CLIP_MIN_SAMPLES.max((CLIP_MIN_SHARE * n as f64).ceil() as usize);
+    let m = OnModel::of(&y[..n], &sim[..n])?;
+    let my = y[..n].iter().sum::<f64>() / n as f64;
+    let ms = sim[..n].iter().sum::<f64>() / n as f64;
+    let line = |s: f64| my + m.slope * (s - ms);
     let (lo, hi) = min_max(&y[..n]);
-    [hi, lo].into_iter().find_map(|level| {
-        let at: Vec<f64> = (0..n).filter(|&i| y[i] == level).map(|i| sim[i]).collect();
-        let (slo, shi) = min_max(&at);
-        (at.len() >= need && shi - slo > REVERSED_MIN_FLOORS * floor_v).then_some((
-            level,
-            at.len(),
-            shi - slo,
-        ))
-    })
+    [(hi, 1.0), (lo, -1.0)]
+        .into_iter()
+        .find_map(|(level, sign)| {
+            let at: Vec<usize> = (0..n).filter(|&i| y[i] == level).collect();
+            let past = at
+                .iter()
+                .map(|&i| sign * (line(sim[i]) - level))
+                .fold(f64::NEG_INFINITY, f64::max);
+            (at.len() >= need && past > REVERSED_MIN_FLOORS * floor_v).then_some((
+                level,
+                at.len(),
+                past,
+            ))
+        })
 }
 
 /// A record's output against the model's simulated output: the slope of the one on the other,
@@ -682,9 +693,10 @@ pub fn diagnose(base: &ModelFile, data: &[Data], opts: &Options) -> anyhow::Resu
         if let Some((level, count, span)) = clipped(&d.y_v, s, *f) {
             bail!(
                 "record {}: its output reads exactly {level:.4} V at {count} samples ({:.1} % \
-                 of the record) while the model's output moves {:.1} mV over them: the sensor \
-                 or the logger clipped at its range. The workflow fits the stage, not a clipped \
-                 recording: record within the range, or leave the clipped part out",
+                 of the record), where the model's output, scaled to the record, goes {:.1} mV \
+                 past it: the sensor or the logger clipped at its range. The workflow fits the \
+                 stage, not a clipped recording: record within the range, or leave the clipped \
+                 part out",
                 d.name,
                 100.0 * count as f64 / d.len() as f64,
                 1e3 * span
@@ -692,9 +704,10 @@ pub fn diagnose(base: &ModelFile, data: &[Data], opts: &Options) -> anyhow::Resu
         }
     }
     // (what the recording adds is taken out before anything is judged or fitted, and said
-    // with the floors: first the mains' interference, a standing line that a glitch barely
-    // moves, then the glitches, on the residual without it, whose bursts are judged against
-    // a straight line through twenty neighbours that a 50 Hz line bends)
+    // with the floors: first the mains' interference, a standing line, then the glitches,
+    // on the residual without it, whose bursts are judged against the straight line through
+    // twenty neighbours that a 50 Hz line bends; where both are found, the lines are fitted
+    // again on the record without the glitches, which move a line's fit)
     let mut hum = Vec::new();
     let mut glitches = Vec::new();
     let cleaned: Vec<Data> = data

@@ -292,6 +292,17 @@ fn fields_of(s: &str, sep: char) -> Vec<&str> {
     }
 }
 
+/// A units row's field: text with a letter in it that is no number and no missing value's
+/// mark (`s`, `V`, `[V]`, `(um)`; not `NA`, `NaN`, `null`).
+fn is_unit(f: &str) -> bool {
+    let bare = f
+        .trim_matches(|c: char| "\"'[]()".contains(c))
+        .to_ascii_lowercase();
+    bare.chars().any(|c| c.is_alphabetic())
+        && bare.parse::<f64>().is_err()
+        && !["na", "nan", "null", "none", "n/a", "inf"].contains(&bare.as_str())
+}
+
 /// A field as a number: a decimal comma is read as a point where the separator is not a
 /// comma.
 fn number_of(text: &str, sep: char) -> Option<f64> {
@@ -504,11 +515,11 @@ impl Record {
                     let wanted = [Some(it), Some(iu), iy, ir];
                     if lines.is_empty()
                         && !units_skipped
-                        && wanted.iter().flatten().all(|&i| {
-                            fields
-                                .get(i)
-                                .is_some_and(|f| !f.is_empty() && number_of(f, sep).is_none())
-                        })
+                        && fields.len() == names.len()
+                        && wanted
+                            .iter()
+                            .flatten()
+                            .all(|&i| fields.get(i).is_some_and(|f| is_unit(f)))
                     {
                         units_skipped = true;
                         continue;

@@ -41,8 +41,8 @@ pub fn simulate_after(
         // end computes a hair short of it: `t[i] - t0` carries the rounding of both times'
         // magnitudes (a record whose clock starts at 1234.5 s lost a whole step at some of
         // its 5 kHz samples to a tolerance of 1e-9 steps: 0.5 mV on a 1 Hz sine), so the
-        // tolerance is that rounding, in steps, and a millionth of a step.
-        let rounding = 1e-15 * (t_s[i].abs() + t0.abs()) / period_s;
+        // tolerance is that rounding (an ulp of each), in steps, and a millionth of a step.
+        let rounding = 2.0 * f64::EPSILON * (t_s[i].abs() + t0.abs()) / period_s;
         let until = ((t_s[i] - t0) / period_s + 1e-6 + rounding)
             .floor()
             .max(0.0) as u64;
