@@ -891,6 +891,24 @@ mod tests {
         (d, 1e-3)
     }
 
+    /// [`noisy_record`]'s input through the stage `truth` (its noise kept): the record, the
+    /// noise's standard deviation, and the output of the stage `model` without noise (the
+    /// base model's simulation the glitches are read against).
+    fn through(
+        truth: &ModelFile,
+        model: &ModelFile,
+        rate_hz: f64,
+        seconds: f64,
+        u: impl Fn(f64) -> f64,
+    ) -> (Data, f64, Vec<f64>) {
+        let (mut d, sd) = noisy_record(rate_hz, seconds, 0.0, 0, u);
+        let noise: Vec<f64> = d.y_v.iter().zip(&d.u_v).map(|(y, u)| y - u).collect();
+        let y = sim(truth, &d).unwrap();
+        d.y_v = y.iter().zip(&noise).map(|(a, b)| a + b).collect();
+        let base = sim(model, &d).unwrap();
+        (d, sd, base)
+    }
+
     /// The floor is the noise's standard deviation whether the noise is white or coloured by
     /// a sensor's bandwidth (first and second order, 300 Hz to 10 kHz, at 5 and 50 kHz),
     /// under a 1 Hz sine over most of the range. The stride-1 estimate alone gives 0.78, 0.38,
@@ -1043,10 +1061,7 @@ mod tests {
         }
         assert!(glitches(&d, sd, None).is_empty(), "a third");
         for (name, u) in [("steps", &steps as &dyn Fn(f64) -> f64), ("fast", &fast)] {
-            let (mut d, sd) = noisy_record(50e3, 0.5, 0.0, 0, u);
-            let noise: Vec<f64> = d.y_v.iter().zip(&d.u_v).map(|(y, u)| y - u).collect();
-            let y = sim(&stage, &d).unwrap();
-            d.y_v = y.iter().zip(&noise).map(|(a, b)| a + b).collect();
+            let (d, sd, y) = through(&stage, &stage, 50e3, 0.5, u);
             assert!(glitches(&d, sd, Some(&y)).is_empty(), "{name}");
         }
         // A one-sample input pulse at 1 kHz, which the stage follows within about a sample:
@@ -1058,10 +1073,7 @@ mod tests {
                 5.0 + t
             }
         };
-        let (mut d, sd) = noisy_record(1e3, 0.5, 0.0, 0, pulse);
-        let noise: Vec<f64> = d.y_v.iter().zip(&d.u_v).map(|(y, u)| y - u).collect();
-        let y = sim(&stage, &d).unwrap();
-        d.y_v = y.iter().zip(&noise).map(|(a, b)| a + b).collect();
+        let (d, sd, y) = through(&stage, &stage, 1e3, 0.5, pulse);
         assert!(
             glitches(&d, sd, Some(&y)).is_empty(),
             "the pulse's residual"
@@ -1071,11 +1083,8 @@ mod tests {
         let mut delayed = ModelFile::built_in("thesis-linear").unwrap();
         delayed.time_delay = Some(crate::io::model_file::DelaySection { delay_s: 2e-4 });
         let slow_steps = |t: f64| 5.0 + 4.0 * ((t * 10.0).floor() * 2.3999).sin();
-        let (mut d, sd) = noisy_record(1e3, 2.0, 0.0, 0, slow_steps);
-        let noise: Vec<f64> = d.y_v.iter().zip(&d.u_v).map(|(y, u)| y - u).collect();
-        let y = sim(&delayed, &d).unwrap();
-        d.y_v = y.iter().zip(&noise).map(|(a, b)| a + b).collect();
-        let base = sim(&ModelFile::built_in("thesis-linear").unwrap(), &d).unwrap();
+        let linear = ModelFile::built_in("thesis-linear").unwrap();
+        let (d, sd, base) = through(&delayed, &linear, 1e3, 2.0, slow_steps);
         assert!(
             glitches(&d, sd, Some(&base)).is_empty(),
             "the delay's edges"
@@ -1131,11 +1140,8 @@ mod tests {
             damping: 0.051,
         });
         let steps = |t: f64| 5.0 + 4.0 * ((t * 5.0).floor() * 2.3999).sin();
-        let (mut d, sd) = noisy_record(50e3, 2.0, 0.0, 0, steps);
-        let noise: Vec<f64> = d.y_v.iter().zip(&d.u_v).map(|(y, u)| y - u).collect();
-        let y = sim(&truth, &d).unwrap();
-        d.y_v = y.iter().zip(&noise).map(|(a, b)| a + b).collect();
-        let base = sim(&ModelFile::built_in("thesis-linear").unwrap(), &d).unwrap();
+        let linear = ModelFile::built_in("thesis-linear").unwrap();
+        let (d, sd, base) = through(&truth, &linear, 50e3, 2.0, steps);
         assert!(glitches(&d, sd, Some(&base)).is_empty(), "the ring");
     }
 
