@@ -431,6 +431,53 @@ pub fn swapped_columns(d: &Data, y_floor: &NoiseFloor) -> Option<f64> {
     (!u_floor.by_resolution && u_share >= SWAPPED_NOISE_RATIO * y_share).then_some(u_floor.sigma_v)
 }
 
+/// The least-squares line of `y` on `x` over their common length: its slope and the means it
+/// goes through, the correlation of the two, and how far `x` moves (standard deviation). A
+/// record's output on the model's simulated output (its slope, sign and the model's
+/// movement: the refusals), or a residual on sample index (a glitch run's neighbours).
+pub struct LineFit {
+    /// Mean of `x`.
+    pub mean_x: f64,
+    /// Mean of `y`.
+    pub mean_y: f64,
+    /// Slope of `y` on `x`.
+    pub slope: f64,
+    /// Correlation of `y` with `x`.
+    pub correlation: f64,
+    /// Standard deviation of `x`.
+    pub sd_x: f64,
+}
+
+impl LineFit {
+    /// `y` on `x`; `None` under two samples.
+    pub fn of(y: &[f64], x: &[f64]) -> Option<Self> {
+        let n = y.len().min(x.len());
+        if n < 2 {
+            return None;
+        }
+        let my = y[..n].iter().sum::<f64>() / n as f64;
+        let mx = x[..n].iter().sum::<f64>() / n as f64;
+        let (mut sxy, mut sxx, mut syy) = (0.0, 0.0, 0.0);
+        for (a, b) in y[..n].iter().zip(&x[..n]) {
+            sxy += (a - my) * (b - mx);
+            syy += (a - my) * (a - my);
+            sxx += (b - mx) * (b - mx);
+        }
+        Some(Self {
+            mean_x: mx,
+            mean_y: my,
+            slope: sxy / sxx.max(1e-300),
+            correlation: sxy / (sxx * syy).sqrt().max(1e-300),
+            sd_x: (sxx / n as f64).sqrt(),
+        })
+    }
+
+    /// The line's `y` at `x`.
+    pub fn at(&self, x: f64) -> f64 {
+        self.mean_y + self.slope * (x - self.mean_x)
+    }
+}
+
 /// The record's resolution, volts: the smallest gap between two of its output's distinct
 /// values, and at least its output's span over `2^RECORD_BITS_MAX`. A record rounded by its
 /// converter (a scope's 8 or 12 bits, a 16-bit ADC) takes whole steps, and where its noise is
@@ -522,22 +569,16 @@ pub fn glitches(d: &Data, floor_v: f64, model_y: Option<&[f64]>) -> Vec<(usize, 
         if i < side || i + len + side > n {
             return None;
         }
-        let nb: Vec<(f64, f64)> = (i - side..i)
-            .chain(i + len..i + len + side)
-            .map(|j| (j as f64 - i as f64, r[j]))
-            .collect();
-        let k = nb.len() as f64;
-        let (mx, my) = nb
+        let at: Vec<usize> = (i - side..i).chain(i + len..i + len + side).collect();
+        let xs: Vec<f64> = at.iter().map(|&j| j as f64 - i as f64).collect();
+        let ys: Vec<f64> = at.iter().map(|&j| r[j]).collect();
+        let line = LineFit::of(&ys, &xs)?;
+        let spread = xs
             .iter()
-            .fold((0.0, 0.0), |(a, b), p| (a + p.0 / k, b + p.1 / k));
-        let sxx: f64 = nb.iter().map(|p| (p.0 - mx) * (p.0 - mx)).sum();
-        let slope = nb.iter().map(|p| (p.0 - mx) * (p.1 - my)).sum::<f64>() / sxx;
-        let line = |x: f64| my + slope * (x - mx);
-        let spread = nb
-            .iter()
-            .map(|p| (p.1 - line(p.0)).abs())
+            .zip(&ys)
+            .map(|(x, y)| (y - line.at(*x)).abs())
             .fold(0.0, f64::max);
-        let want: Vec<f64> = (0..len).map(|j| line(j as f64)).collect();
+        let want: Vec<f64> = (0..len).map(|j| line.at(j as f64)).collect();
         // (one way: a delay the model lacks under a one-sample input pulse leaves a doublet,
         // one sample each way, which is the stage's)
         let off: Vec<f64> = (0..len).map(|j| r[i + j] - want[j]).collect();

@@ -50,6 +50,7 @@ use super::constants::{
     MAINS_INPUT_HARMONICS, MAINS_LINE_RATIO, MAINS_MIN_FLOORS, MAINS_MIN_S, MAINS_SEGMENT_S,
 };
 use super::data::Data;
+use super::signatures::refined_peak;
 use super::unexplained::{MAINS_HARMONICS, MAINS_HZ};
 use rustfft::FftPlanner;
 use rustfft::num_complex::Complex;
@@ -119,17 +120,12 @@ pub fn mains_lines(d: &Data, floor_v: f64, model_y: &[f64]) -> Vec<HumLine> {
     out
 }
 
-/// Block means of `x[start..end]` over `block` samples, and their centres' times.
-fn decimate(x: &[f64], t: &[f64], start: usize, end: usize, block: usize) -> (Vec<f64>, Vec<f64>) {
-    let mut v = Vec::with_capacity((end - start) / block + 1);
-    let mut tc = Vec::with_capacity(v.capacity());
-    let mut i = start;
-    while i + block <= end {
-        v.push(x[i..i + block].iter().sum::<f64>() / block as f64);
-        tc.push(0.5 * (t[i] + t[i + block - 1]));
-        i += block;
-    }
-    (v, tc)
+/// Block means of `x[start..end]` over `block` samples.
+fn decimate(x: &[f64], start: usize, end: usize, block: usize) -> Vec<f64> {
+    x[start..end]
+        .chunks_exact(block)
+        .map(|c| c.iter().sum::<f64>() / block as f64)
+        .collect()
 }
 
 /// Power spectrum of `x` (mean removed, Hann window, zero-padded to `len`), bins `0..len/2`.
@@ -163,8 +159,8 @@ fn segment_lines(
     let fs = 1.0 / dt;
     let block = ((fs / MAINS_DECIMATED_HZ).floor() as usize).max(1);
     let fd = fs / block as f64;
-    let (x, _) = decimate(r, &d.t_s, start, end, block);
-    let (s, _) = decimate(model_y, &d.t_s, start, end, block);
+    let x = decimate(r, start, end, block);
+    let s = decimate(model_y, start, end, block);
     if x.len() < 64 {
         return Vec::new();
     }
@@ -201,7 +197,7 @@ fn segment_lines(
         let Some(k) = (lo..=hi).max_by(|&a, &b| px[a].total_cmp(&px[b])) else {
             continue;
         };
-        let hz = refine(&px, k) * df;
+        let hz = refined_peak(&px, k) * df;
         let line = px[k];
         // The spectrum around it, beyond the Hann window's main lobe.
         let inner = 4.0 / seg_s;
@@ -272,22 +268,6 @@ fn segment_lines(
         });
     }
     out
-}
-
-/// The peak bin `k` of `p` refined between bins: the vertex of a parabola through the log
-/// powers of `k` and its neighbours (a Hann window's line is close to a Gaussian in log power).
-fn refine(p: &[f64], k: usize) -> f64 {
-    if k == 0 || k + 1 >= p.len() {
-        return k as f64;
-    }
-    let l = |j: usize| p[j].max(1e-300).ln();
-    let (a, b, c) = (l(k - 1), l(k), l(k + 1));
-    let den = a - 2.0 * b + c;
-    if den < 0.0 {
-        k as f64 + (0.5 * (a - c) / den).clamp(-0.5, 0.5)
-    } else {
-        k as f64
-    }
 }
 
 /// Weighted least squares of `r[start..end]` on `cos(w t)` and `sin(w t)` at `hz`, with a

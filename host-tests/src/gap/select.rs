@@ -19,7 +19,7 @@ use super::constants::{
     STRUCTURE_ROUNDS,
 };
 use super::data::{
-    Data, NoiseFloor, min_max, mse, noise_floor_of, sim, simulate_all, swapped_columns,
+    Data, LineFit, NoiseFloor, min_max, mse, noise_floor_of, sim, simulate_all, swapped_columns,
     without_glitches,
 };
 use super::everett::CentreLine;
@@ -540,8 +540,8 @@ struct Candidate {
 /// `REVERSED_MIN_FLOORS` noise floors (`floor_v`, standard deviation): a record whose sensor's
 /// sign is reversed. `None` otherwise.
 fn moves_against(y: &[f64], sim: &[f64], floor_v: f64) -> Option<f64> {
-    let m = OnModel::of(y, sim)?;
-    (m.sd_sim_v > REVERSED_MIN_FLOORS * floor_v && m.correlation < -REVERSED_CORRELATION)
+    let m = LineFit::of(y, sim)?;
+    (m.sd_x > REVERSED_MIN_FLOORS * floor_v && m.correlation < -REVERSED_CORRELATION)
         .then_some(m.correlation)
 }
 
@@ -551,9 +551,9 @@ fn moves_against(y: &[f64], sim: &[f64], floor_v: f64) -> Option<f64> {
 /// more than `REVERSED_MIN_FLOORS` of the record's floors (`floor_v`, in the record's units,
 /// brought to the model's by the slope): a record in other units. `None` otherwise.
 fn scale_apart(y: &[f64], sim: &[f64], floor_v: f64) -> Option<f64> {
-    let m = OnModel::of(y, sim)?;
+    let m = LineFit::of(y, sim)?;
     let k = m.slope.abs();
-    (m.sd_sim_v * k.max(1e-300) > REVERSED_MIN_FLOORS * floor_v
+    (m.sd_x * k.max(1e-300) > REVERSED_MIN_FLOORS * floor_v
         && !(1.0 / SCALE_APART_MAX..=SCALE_APART_MAX).contains(&k))
     .then_some(k)
 }
@@ -561,11 +561,11 @@ fn scale_apart(y: &[f64], sim: &[f64], floor_v: f64) -> Option<f64> {
 /// The correlation of a record's output `y` with the model's simulated output `sim`, where
 /// it is within `FOLLOW_MIN_CORRELATION` of zero while the simulation moves more than
 /// `REVERSED_MIN_FLOORS` noise floors: a record whose output does not follow its input (a
-/// disconnected sensor, another signal's column). `None` otherwise.
-fn not_following(y: &[f64], sim: &[f64], floor_v: f64) -> Option<f64> {
-    let m = OnModel::of(y, sim)?;
-    (m.sd_sim_v > REVERSED_MIN_FLOORS * floor_v && m.correlation.abs() < FOLLOW_MIN_CORRELATION)
-        .then_some(m.correlation)
+/// disconnected sensor, another signal's column): the fit that says so. `None` otherwise.
+fn not_following(y: &[f64], sim: &[f64], floor_v: f64) -> Option<LineFit> {
+    let m = LineFit::of(y, sim)?;
+    (m.sd_x > REVERSED_MIN_FLOORS * floor_v && m.correlation.abs() < FOLLOW_MIN_CORRELATION)
+        .then_some(m)
 }
 
 /// A record's output clipped by its sensor or logger: the extreme value (volts) its output
@@ -578,10 +578,7 @@ fn not_following(y: &[f64], sim: &[f64], floor_v: f64) -> Option<f64> {
 fn clipped(y: &[f64], sim: &[f64], floor_v: f64) -> Option<(f64, usize, f64)> {
     let n = y.len().min(sim.len());
     let need = CLIP_MIN_SAMPLES.max((CLIP_MIN_SHARE * n as f64).ceil() as usize);
-    let m = OnModel::of(&y[..n], &sim[..n])?;
-    let my = y[..n].iter().sum::<f64>() / n as f64;
-    let ms = sim[..n].iter().sum::<f64>() / n as f64;
-    let line = |s: f64| my + m.slope * (s - ms);
+    let m = LineFit::of(&y[..n], &sim[..n])?;
     let (lo, hi) = min_max(&y[..n]);
     [(hi, 1.0), (lo, -1.0)]
         .into_iter()
@@ -589,7 +586,7 @@ fn clipped(y: &[f64], sim: &[f64], floor_v: f64) -> Option<(f64, usize, f64)> {
             let at: Vec<usize> = (0..n).filter(|&i| y[i] == level).collect();
             let past = at
                 .iter()
-                .map(|&i| sign * (line(sim[i]) - level))
+                .map(|&i| sign * (m.at(sim[i]) - level))
                 .fold(f64::NEG_INFINITY, f64::max);
             (at.len() >= need && past > REVERSED_MIN_FLOORS * floor_v).then_some((
                 level,
@@ -597,37 +594,6 @@ fn clipped(y: &[f64], sim: &[f64], floor_v: f64) -> Option<(f64, usize, f64)> {
                 past,
             ))
         })
-}
-
-/// A record's output against the model's simulated output: the slope of the one on the other,
-/// their correlation, and how far the simulation moves (standard deviation, volts).
-struct OnModel {
-    slope: f64,
-    correlation: f64,
-    sd_sim_v: f64,
-}
-
-impl OnModel {
-    /// `y` on `sim` over their common length; `None` under two samples.
-    fn of(y: &[f64], sim: &[f64]) -> Option<Self> {
-        let n = y.len().min(sim.len());
-        if n < 2 {
-            return None;
-        }
-        let my = y[..n].iter().sum::<f64>() / n as f64;
-        let ms = sim[..n].iter().sum::<f64>() / n as f64;
-        let (mut sxy, mut sxx, mut syy) = (0.0, 0.0, 0.0);
-        for (a, b) in y[..n].iter().zip(&sim[..n]) {
-            sxy += (a - my) * (b - ms);
-            syy += (a - my) * (a - my);
-            sxx += (b - ms) * (b - ms);
-        }
-        Some(Self {
-            slope: sxy / sxx.max(1e-300),
-            correlation: sxy / (sxx * syy).sqrt().max(1e-300),
-            sd_sim_v: (sxx / n as f64).sqrt(),
-        })
-    }
 }
 
 /// Run the workflow from `base` on `data`.
@@ -690,7 +656,7 @@ pub fn diagnose(base: &ModelFile, data: &[Data], opts: &Options) -> anyhow::Resu
     // (a record clipped by its sensor or logger is refused on its own samples: the cleaning
     // below moves them)
     for ((d, s), f) in data.iter().zip(&base_sims).zip(&noise) {
-        if let Some((level, count, span)) = clipped(&d.y_v, s, *f) {
+        if let Some((level, count, past_v)) = clipped(&d.y_v, s, *f) {
             bail!(
                 "record {}: its output reads exactly {level:.4} V at {count} samples ({:.1} % \
                  of the record), where the model's output, scaled to the record, goes {:.1} mV \
@@ -699,7 +665,7 @@ pub fn diagnose(base: &ModelFile, data: &[Data], opts: &Options) -> anyhow::Resu
                  part out",
                 d.name,
                 100.0 * count as f64 / d.len() as f64,
-                1e3 * span
+                1e3 * past_v
             );
         }
     }
@@ -739,14 +705,15 @@ pub fn diagnose(base: &ModelFile, data: &[Data], opts: &Options) -> anyhow::Resu
         .collect();
     let data: &[Data] = &cleaned;
     for ((d, s), f) in data.iter().zip(&base_sims).zip(&noise) {
-        if let Some(c) = not_following(&d.y_v, s, *f) {
+        if let Some(m) = not_following(&d.y_v, s, *f) {
             bail!(
-                "record {}: its output does not follow the model's (correlation {c:.2} between \
+                "record {}: its output does not follow the model's (correlation {:.2} between \
                  the record's y and the model's simulated output, which moves {:.1} mV): is the \
                  sensor connected, and is y its column? The workflow names small departures \
                  from the model",
                 d.name,
-                1e3 * OnModel::of(&d.y_v, s).map_or(0.0, |m| m.sd_sim_v)
+                m.correlation,
+                1e3 * m.sd_x
             );
         }
         if let Some(c) = moves_against(&d.y_v, s, *f) {

@@ -337,6 +337,24 @@ pub(crate) fn averaged_spectrum(r: &[f64], t: f64, seg: usize) -> Vec<(f64, f64)
         .collect()
 }
 
+/// The peak bin `k` of the power spectrum `p` refined between bins: the vertex of a parabola
+/// through the log powers of `k` and its neighbours (a Hann window's line is close to a
+/// Gaussian in log power, so the refined centre is within a small part of a bin), at most half
+/// a bin off `k`; `k` itself at the spectrum's ends or where the three do not peak.
+pub(crate) fn refined_peak(p: &[f64], k: usize) -> f64 {
+    if k == 0 || k + 1 >= p.len() {
+        return k as f64;
+    }
+    let l = |j: usize| p[j].max(1e-300).ln();
+    let (a, b, c) = (l(k - 1), l(k), l(k + 1));
+    let den = a - 2.0 * b + c;
+    if den < 0.0 {
+        k as f64 + (0.5 * (a - c) / den).clamp(-0.5, 0.5)
+    } else {
+        k as f64
+    }
+}
+
 /// Median level of `spec` above 500 Hz (the reference of the line test).
 fn median_above_500(spec: &[(f64, f64)]) -> f64 {
     let mut mags: Vec<f64> = spec

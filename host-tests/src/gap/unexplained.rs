@@ -154,25 +154,14 @@ pub const MAINS_HARMONICS: usize = 5;
 /// Hann window adds as much); a spectrum coarser than this window names no mains line.
 pub const MAINS_TOL_SHARE: f64 = 0.02;
 
-/// The input's strongest line, Hz, refined between its bins: the peak of a parabola through
-/// the log magnitudes of the largest bin and its neighbours (a Hann window's line is close
-/// to a Gaussian in log magnitude, so the refined centre is within a small part of a bin).
+/// The input's strongest line, Hz, refined between its bins
+/// ([`super::signatures::refined_peak`]).
 fn strongest_line_hz(input: &[(f64, f64)], df: f64) -> f64 {
     let Some(k) = (0..input.len()).max_by(|&a, &b| input[a].1.total_cmp(&input[b].1)) else {
         return 0.0;
     };
-    if k == 0 || k + 1 >= input.len() {
-        return input[k].0;
-    }
-    let l = |j: usize| input[j].1.max(1e-300).ln();
-    let (a, b, c) = (l(k - 1), l(k), l(k + 1));
-    let den = a - 2.0 * b + c;
-    let delta = if den < 0.0 {
-        (0.5 * (a - c) / den).clamp(-0.5, 0.5)
-    } else {
-        0.0
-    };
-    input[k].0 + delta * df
+    let powers: Vec<f64> = input.iter().map(|b| b.1).collect();
+    input[k].0 + (super::signatures::refined_peak(&powers, k) - k as f64) * df
 }
 
 /// What drives the residual's line at `f` Hz (spectrum bin width `df`; `input` the input's
