@@ -741,6 +741,68 @@ fn full_thesis_stage_names_its_slow_effects() {
     );
 }
 
+/// The full thesis stage on random levels, the protocol a lab reaches for first (`piezo synth
+/// --protocol steps`): a stage that creeps and has a loop shows both in its holds, tails and
+/// levels that sit apart by the direction of the step into them. The loop was admitted only
+/// on flat holds, so such records named `drift` alone and ended at 41-55x the floor (session
+/// 28, seeds 1 and 4-6 of the CLI, holds of 0.5 and 2 s); a drift in the model now owns the
+/// tails. Three records from seeds no rule was read on, holds of 0.25, 0.8 and 3 s, three
+/// spans and rates: drift and hysteresis named, nothing the stage lacks, and within the
+/// issue's 2x of the floor for a single record (measured 1.26, 1.65 and 1.21x).
+#[test]
+fn the_thesis_stage_on_random_levels_names_its_loop_beside_its_drift() {
+    use host_tests::sim::synth::{Protocol, SynthSpec, synth};
+    let base = ModelFile::built_in("thesis-linear").unwrap();
+    let cases: [(u64, f64, f64, f64, f64, f64); 3] = [
+        // (seed, seconds, rate Hz, lowest input V, span V, hold s)
+        (41, 15.0, 4_000.0, 0.5, 9.0, 0.25),
+        (42, 30.0, 2_000.0, 0.0, 10.0, 0.8),
+        (43, 45.0, 1_000.0, 1.5, 7.0, 3.0),
+    ];
+    for (seed, seconds, rate, offset, amplitude, hold) in cases {
+        let spec = SynthSpec {
+            model: "thesis-full".into(),
+            protocol: Protocol::Steps,
+            seed,
+            seconds,
+            rate,
+            amplitude,
+            offset,
+            freq: 1.0,
+            freq_end: 100.0,
+            hold: Some(hold),
+            noise_v: None,
+        };
+        let data = vec![Data::from_record("steps.csv", synth(&spec).unwrap()).unwrap()];
+        let d = diagnose(&base, &data, &Options::default()).unwrap();
+        let ratio = d.final_rms_v / d.noise_floor_v;
+        println!(
+            "seed {seed}: named {:?}, final {ratio:.2}x the floor",
+            d.named
+        );
+        for e in ["drift", "hysteresis"] {
+            assert!(
+                d.named.iter().any(|n| n == e),
+                "seed {seed}: {e} not named: {:?}",
+                d.named
+            );
+        }
+        let truth_effects = [
+            "drift",
+            "hysteresis",
+            "nonlinear-gain",
+            "slew-rate-limit",
+            "saturation",
+        ];
+        assert!(
+            d.named.iter().all(|n| truth_effects.contains(&n.as_str())),
+            "seed {seed}: a name the truth lacks: {:?}",
+            d.named
+        );
+        assert!(ratio <= 2.0, "seed {seed}: final {ratio:.2}x the floor");
+    }
+}
+
 /// Issue #12's requirement on the full thesis stage: its identification records (150 s slow
 /// record, `piezo synth --model thesis-full --protocol identification --seconds 150`, noise
 /// seeds 1-5) diagnosed from `thesis-linear` name drift, hysteresis and nonlinear-gain, no
