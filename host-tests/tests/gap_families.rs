@@ -274,6 +274,14 @@ fn run_case(seed: u64) -> Outcome {
             d.table()
         );
         print!("{}", d.trace());
+        let g = &d.signatures;
+        println!(
+            "base signatures: held loop {:.2} mV, tail {:.2} mV, loop {:.2} mV, noise {:.2} mV",
+            1e3 * g.held_loop_v,
+            1e3 * g.tail_v,
+            1e3 * g.loop_v,
+            1e3 * g.noise_v
+        );
     }
     let mut named = d.named.clone();
     named.sort();
@@ -829,4 +837,95 @@ fn creep_counted_from_the_first_input_is_not_a_sensor_offset() {
         fired >= 2,
         "step 12 fired on {fired} of the creep-only cases\n{report}"
     );
+}
+
+/// A creep and a loop together, the pair every piezo stage has, which the suite's draws
+/// almost never make (drift is one of eight effects, and only on protocols with holds: none
+/// of the 100 cases has the pair). Drift and hysteresis from the families' own generators
+/// (log or power creep; Bouc-Wen, Duhem, PI or Preisach loops, at rest or after an
+/// excursion), on random levels (odd seeds) and on the identification protocol (even), seeds
+/// 4001-4016 drawn for this test (4001-4007 then set `HELD_LOOP_OVER_TAIL`).
+///
+/// Before session 28 the held levels' gap did not admit the loop while the holds showed a
+/// tail: the random-levels cases named `drift` with a false `nonlinear-gain` (4001, 63x) or
+/// nothing (4003, 4005, 4007 at 122-256x). Now the loop is admitted beside a drift in the
+/// model, and a creep and a loop are offered as one step where the gap stands clear of the
+/// tails (4007: drift alone explained nothing). Measured: hysteresis named on all 16, drift on
+/// 14 (not on 4003, 4013), 4 false names (a `nonlinear-gain` or `sensor-gain` beside a loop
+/// of another form), 10 exact; the identification cases' Duhem loops that run backwards
+/// after reversals end at 41-108x (their misfit, as in the suite). Asserted at those counts:
+/// a guard, not the figure.
+#[test]
+fn a_creep_and_a_loop_together_are_both_named() {
+    if cfg!(debug_assertions) {
+        return;
+    }
+    let base = ModelFile::built_in("thesis-linear").unwrap();
+    let mut lines = Vec::new();
+    let (mut loops, mut creeps, mut false_names) = (0, 0, 0);
+    let only: Option<u64> = std::env::var("CREEP_SEED")
+        .ok()
+        .and_then(|s| s.parse().ok());
+    let seeds: Vec<u64> = (4001..=4016u64)
+        .filter(|s| only.is_none_or(|o| o == *s))
+        .collect();
+    for &seed in &seeds {
+        let mut rng = StdRng::seed_from_u64(seed);
+        let family = if seed % 2 == 0 {
+            Family::Identification
+        } else {
+            Family::RandomLevels
+        };
+        let protocol = draw_protocol(family, &mut rng);
+        let hysteresis = Hysteresis::draw(&mut rng);
+        let creep = Creep::draw(&mut rng);
+        let case = Case {
+            seed,
+            protocol,
+            effects: vec!["drift", "hysteresis"],
+            hysteresis: Some(hysteresis),
+            creep: Some(creep),
+            static_map: None,
+            sensor_gain: None,
+            offset_v: None,
+            delay_s: None,
+            slew_v_per_s: None,
+            mode: None,
+        };
+        let data = case.records();
+        let d = diagnose(&base, &data, &Options::default()).expect("diagnosis");
+        let mut named = d.named.clone();
+        named.sort();
+        let ratio = d.final_rms_v / d.noise_floor_v;
+        loops += named.iter().any(|n| n == "hysteresis") as usize;
+        creeps += named.iter().any(|n| n == "drift") as usize;
+        false_names += named
+            .iter()
+            .filter(|n| !case.effects.contains(&n.as_str()))
+            .count();
+        let g = &d.signatures;
+        lines.push(format!(
+            "seed {seed} ({}): named {named:?}, {ratio:.2}x; holds' gap {:.1} mV, tail {:.1} mV",
+            case.describe(),
+            1e3 * g.held_loop_v,
+            1e3 * g.tail_v
+        ));
+        if std::env::var("GAP_DEBUG").is_ok() {
+            lines.push(d.table());
+            for (i, t) in d.tried.iter().enumerate() {
+                lines.push(format!("  tried at step {}: {t:?}", i + 1));
+            }
+        }
+    }
+    let report = lines.join("\n");
+    println!("{report}");
+    println!(
+        "hysteresis named on {loops} of {n}, drift on {creeps}, {false_names} false names",
+        n = seeds.len()
+    );
+    if only.is_none() {
+        assert_eq!(loops, seeds.len(), "{report}");
+        assert!(creeps >= 14, "drift named on {creeps} of 16\n{report}");
+        assert!(false_names <= 4, "{false_names} false names\n{report}");
+    }
 }

@@ -163,6 +163,14 @@ pub const HELD_LOOP_MIN_DIR_SHARE: f64 = 0.25;
 /// the drifts named falsely beside tails of 0.0-0.6 mV (1024, 1033, 1057, 1 mV floors), the
 /// true ones beside 35-146 mV.
 pub const DRIFT_TAIL_MIN_NOISE: f64 = 3.0;
+/// The joint step of a creep and a loop (`select::creep_and_loop`) is offered where the held
+/// levels sit apart by the direction of the step into them by at least this many times the
+/// largest tail of a hold. A creep that has not caught up after a step leaves levels apart by
+/// less than the change it shows over a hold: on the families suite's creep-only random
+/// levels the gap was 0.17-0.49 of the tail (1073, 1087, 1096; offered there, the pair put a
+/// false `hysteresis` in 1073's drift's place at 29x); a creep beside a loop drawn by the same
+/// generators showed 2.2-11 (session 28, seeds 4001-4015). Our assumption: 1, between.
+pub const HELD_LOOP_OVER_TAIL: f64 = 1.0;
 
 /// Share of a fitted `offset` that the residual without it (the others refitted) must show,
 /// on the same side of zero, for the final check to keep it: the residual's least-squares

@@ -18,6 +18,7 @@ use super::constants::{
     REVERSED_MIN_FLOORS, RISE_CHOICE_RATIO, SCALE_APART_MAX, STATIC_TELL_RATIO, STOP_FLOOR_RATIO,
     STRUCTURE_ROUNDS,
 };
+use super::constants::{DRIFT_TAIL_MIN_NOISE, HELD_LOOP_OVER_TAIL, HYST_LOOP_MIN_NOISE};
 use super::data::{
     Data, LineFit, NoiseFloor, min_max, mse, noise_floor_of, sim, simulate_all, swapped_columns,
     without_glitches,
@@ -388,6 +389,40 @@ fn creep_start(
         creep_v: first_creep_v?,
     })
 }
+
+/// The joint step of a creep and a loop ([`CREEP_AND_LOOP`]): offered where the model has
+/// neither, and the residual's holds show both a tail and a held levels' gap of
+/// [`DRIFT_TAIL_MIN_NOISE`] and [`HYST_LOOP_MIN_NOISE`] noise floors, the gap at least
+/// [`HELD_LOOP_OVER_TAIL`] times the tail.
+fn creep_and_loop(
+    model: &ModelFile,
+    data: &[Data],
+    slow_x: &SlowRegressors,
+    u_range: (f64, f64),
+    sigs: &signatures::Signatures,
+) -> Option<Candidate> {
+    let shown = sigs.tail_v >= DRIFT_TAIL_MIN_NOISE * sigs.noise_v
+        && sigs.held_loop_v >= HYST_LOOP_MIN_NOISE * sigs.noise_v
+        && sigs.held_loop_v >= HELD_LOOP_OVER_TAIL * sigs.tail_v;
+    if !shown || CREEP_AND_LOOP.iter().any(|e| catalogue::present(model, e)) {
+        return None;
+    }
+    let (m, sims, mse) = fit_slow_set(model, data, slow_x, &CREEP_AND_LOOP, u_range)?;
+    Some(Candidate {
+        effect: CREEP_AND_LOOP.join("+"),
+        refit: false,
+        model: m,
+        k: CREEP_AND_LOOP
+            .iter()
+            .map(|e| catalogue::param_count(e))
+            .sum(),
+        sims,
+        mse,
+    })
+}
+
+/// A creep and a loop, fitted as one step on held levels that show both.
+const CREEP_AND_LOOP: [&str; 2] = ["drift", "hysteresis"];
 
 /// The pairs the issue names (#12 item 1): without holds, a drift lag and a hysteresis loop
 /// both shape a slow periodic residual. Each is refitted in the other's place with the slow
@@ -867,7 +902,7 @@ fn diagnose_split(
                 EFFECTS.len()
             ));
         }
-        let cands = candidates(
+        let mut cands = candidates(
             &model,
             data,
             &slow_x,
@@ -876,6 +911,15 @@ fn diagnose_split(
             sigs.peak_hz,
             &named,
         )?;
+        // Holds that show tails and levels apart by the step's direction: a creep and a loop
+        // together, the pair every piezo stage has. The loop alone is not admitted beside
+        // tails (a creep that has not caught up leaves levels apart too), and the drift
+        // alone can explain nothing while the loop's gap dominates the holds (a Preisach
+        // loop beside a power creep on random levels: nothing named, 122x the floor), so
+        // the two are also fitted together as one step (the final check then weighs each).
+        if let Some(c) = creep_and_loop(&model, data, &slow_x, u_range, &sigs) {
+            cands.push(c);
+        }
         // Fast effects are fitted and scored on the fast records (where they show), slow ones
         // on all records; no candidate may make any record's excess worse by > 20 %.
         let fast_set: Vec<usize> = {
@@ -921,7 +965,7 @@ fn diagnose_split(
                 &all_set
             };
             let (score, explained, harmless) = judge(&c, set);
-            let sig_ok = sigs.supports(&c.effect, &c.model);
+            let sig_ok = c.effect.split('+').all(|e| sigs.supports(e, &c.model));
             let ok = score < 0.0 && explained >= MIN_EXPLAINED && sig_ok && harmless;
             scored.push((c, score, explained, ok));
         }
@@ -1232,7 +1276,9 @@ fn diagnose_split(
         cur_mse = best.mse;
         // A new or refitted hysteresis table: the start memory that suits it, the slow
         // effects refitted from it (folded into this step: it is the table's own state).
-        if steps.last().is_some_and(|s| s.effect == "hysteresis")
+        if steps
+            .last()
+            .is_some_and(|s| s.effect.split('+').any(|e| e == "hysteresis"))
             && !at_floor_now(&cur_mse, &var)
             && let Some(f) = start::search(&model, data, &slow_x, u_range, &cur_mse)
         {
