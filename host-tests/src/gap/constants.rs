@@ -169,7 +169,8 @@ pub const DRIFT_TAIL_MIN_NOISE: f64 = 3.0;
 /// less than the change it shows over a hold: on the families suite's creep-only random
 /// levels the gap was 0.17-0.49 of the tail (1073, 1087, 1096; offered there, the pair put a
 /// false `hysteresis` in 1073's drift's place at 29x); a creep beside a loop drawn by the same
-/// generators showed 2.2-11 (session 28, seeds 4001-4015). Our assumption: 1, between.
+/// generators showed 2.2-6.5 (session 28, seeds 4001-4007, which set this value; 7.8-11 on
+/// 4009-4015, read after). Our assumption: 1, between.
 pub const HELD_LOOP_OVER_TAIL: f64 = 1.0;
 
 /// Share of a fitted `offset` that the residual without it (the others refitted) must show,

@@ -12,13 +12,12 @@
 use super::catalogue::{self, EFFECTS, FAST, SLOW};
 use super::constants::{
     CANDIDATE_ROUNDS, CANNOT_TELL_RATIO, CLIP_MIN_SAMPLES, CLIP_MIN_SHARE, CREEP_START_MIN_FLOORS,
-    CREEP_START_SHARE, FOLLOW_MIN_CORRELATION, HOLD_MIN_S, MAX_STEPS, MIN_EXPLAINED,
-    OCCAM_SWAP_RATIO, PAIR_FLOOR_RATIO, PRUNE_KEEP_EXCESS_VAR, PRUNE_PER_PARAM, PRUNE_RATIO,
-    REST_ZERO_INPUT_V, REST_ZERO_SHOWN_MIN, REST_ZERO_SIGMAS, REVERSED_CORRELATION,
-    REVERSED_MIN_FLOORS, RISE_CHOICE_RATIO, SCALE_APART_MAX, STATIC_TELL_RATIO, STOP_FLOOR_RATIO,
-    STRUCTURE_ROUNDS,
+    CREEP_START_SHARE, DRIFT_TAIL_MIN_NOISE, FOLLOW_MIN_CORRELATION, HELD_LOOP_OVER_TAIL,
+    HOLD_MIN_S, HYST_LOOP_MIN_NOISE, MAX_STEPS, MIN_EXPLAINED, OCCAM_SWAP_RATIO, PAIR_FLOOR_RATIO,
+    PRUNE_KEEP_EXCESS_VAR, PRUNE_PER_PARAM, PRUNE_RATIO, REST_ZERO_INPUT_V, REST_ZERO_SHOWN_MIN,
+    REST_ZERO_SIGMAS, REVERSED_CORRELATION, REVERSED_MIN_FLOORS, RISE_CHOICE_RATIO,
+    SCALE_APART_MAX, STATIC_TELL_RATIO, STOP_FLOOR_RATIO, STRUCTURE_ROUNDS,
 };
-use super::constants::{DRIFT_TAIL_MIN_NOISE, HELD_LOOP_OVER_TAIL, HYST_LOOP_MIN_NOISE};
 use super::data::{
     Data, LineFit, NoiseFloor, min_max, mse, noise_floor_of, sim, simulate_all, swapped_columns,
     without_glitches,
@@ -37,8 +36,9 @@ use anyhow::{Context, bail, ensure};
 /// One step of the workflow: the effect added or refitted.
 #[derive(Clone, Debug, serde::Serialize)]
 pub struct Step {
-    /// Effect name (one of [`EFFECTS`]; a refit of several, or a static shape fitted with an
-    /// offset at one step, `X+offset`: their names joined by `+`).
+    /// Effect name (one of [`EFFECTS`]; a refit of several, a static shape fitted with an
+    /// offset at one step, `X+offset`, or a creep and a loop fitted as one step,
+    /// `drift+hysteresis`: their names joined by `+`).
     pub effect: String,
     /// Evidence in words.
     pub evidence: String,
@@ -1245,7 +1245,13 @@ fn diagnose_split(
                 alike.join(", ")
             )
         } else {
-            sigs.describe(&best.effect, &best.model)
+            // (each part's own evidence: a creep and a loop fitted as one step)
+            parts
+                .iter()
+                .map(|p| sigs.describe(p, &best.model))
+                .filter(|w| !w.is_empty())
+                .collect::<Vec<_>>()
+                .join(", and ")
         };
         let evidence = format!(
             "{}; explains {:.0} % of the residual power above the noise floor; score {:.0} (BIC, {} parameter{})",
@@ -1290,7 +1296,11 @@ fn diagnose_split(
                 s.rms_after_v = rms_of(&cur_mse);
                 s.record_rms_after_v = cur_mse.iter().map(|m| m.sqrt()).collect();
                 s.sims = sims.clone();
-                s.params = params_json(&model, "hysteresis");
+                s.params = s
+                    .effect
+                    .split('+')
+                    .flat_map(|p| params_json(&model, p))
+                    .collect();
             }
         }
     }

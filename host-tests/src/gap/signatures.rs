@@ -15,8 +15,9 @@
 //! * **loop** (slowly moving input): the largest gap between the residual on rising and on
 //!   falling input at the same input level: hysteresis; in a record of steps alone (random
 //!   levels, no input that moves slowly) the gap between held levels reached from below and
-//!   from above, a static quadratic taken out, which counts only where the holds show no
-//!   tail (a creep that has not caught up leaves the same pattern);
+//!   from above, a static quadratic taken out, which counts where the holds show no tail (a
+//!   creep that has not caught up leaves the same pattern) or the model already has a drift
+//!   (a creep and a loop together: the tails are the drift's; session 28);
 //! * **static curve** (settled samples): the curvature of the residual against the input:
 //!   non-linear gain;
 //! * **range**: whether the input comes near the amplifier's limits: saturation;

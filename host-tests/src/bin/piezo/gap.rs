@@ -7,7 +7,8 @@
 //! variables (a lab's own header such as `time_s,input_V,sensor_V`), default `t=t,u=u,y=y`. The table
 //! goes to stdout (or one JSON object with `--json`: `{"named", "steps": [{"effect",
 //! "evidence", "params", "rms_before_v", "rms_after_v", "refit", "removed"}] (a step's
-//! `effect` joins with `+` the effects it fitted together: a refit, or `X+offset`),
+//! `effect` joins with `+` the effects it fitted together: a refit, `X+offset`, or
+//! `drift+hysteresis`, a creep and a loop fitted as one step on held levels that show both),
 //! "noise_floor_v", "noise_notes" (one sentence per record whose floor was read past white
 //! noise, coloured or below the record's resolution, or whose glitches were replaced),
 //! "final_rms_v", "unexplained", "cannot_tell", "hysteresis_split": {"chosen",
