@@ -675,10 +675,17 @@ fn the_thesis_table_alone_is_fitted_near_the_floor() {
 /// `thesis-full`'s slow effects (drift, hysteresis, nonlinear-gain) are named, and nothing
 /// beyond what the stage has over `thesis-linear` (those, its slew limit and saturation).
 fn assert_thesis_slow_effects_named(d: &gap::Diagnosis) {
-    for e in ["drift", "hysteresis", "nonlinear-gain"] {
+    assert_thesis_stage_names(d, &["drift", "hysteresis", "nonlinear-gain"], "");
+}
+
+/// `required` of `thesis-full`'s effects are named, and nothing beyond what the stage has
+/// over `thesis-linear` (its drift, hysteresis, nonlinear-gain, slew limit and saturation);
+/// `case` opens the failure messages.
+fn assert_thesis_stage_names(d: &gap::Diagnosis, required: &[&str], case: &str) {
+    for e in required {
         assert!(
             d.named.iter().any(|n| n == e),
-            "{e} not named: {:?}",
+            "{case}{e} not named: {:?}",
             d.named
         );
     }
@@ -691,7 +698,7 @@ fn assert_thesis_slow_effects_named(d: &gap::Diagnosis) {
     ];
     assert!(
         d.named.iter().all(|n| truth_effects.contains(&n.as_str())),
-        "a name the truth lacks: {:?}",
+        "{case}a name the truth lacks: {:?}",
         d.named
     );
 }
@@ -780,25 +787,7 @@ fn the_thesis_stage_on_random_levels_names_its_loop_beside_its_drift() {
             "seed {seed}: named {:?}, final {ratio:.2}x the floor",
             d.named
         );
-        for e in ["drift", "hysteresis"] {
-            assert!(
-                d.named.iter().any(|n| n == e),
-                "seed {seed}: {e} not named: {:?}",
-                d.named
-            );
-        }
-        let truth_effects = [
-            "drift",
-            "hysteresis",
-            "nonlinear-gain",
-            "slew-rate-limit",
-            "saturation",
-        ];
-        assert!(
-            d.named.iter().all(|n| truth_effects.contains(&n.as_str())),
-            "seed {seed}: a name the truth lacks: {:?}",
-            d.named
-        );
+        assert_thesis_stage_names(&d, &["drift", "hysteresis"], &format!("seed {seed}: "));
         assert!(ratio <= 2.0, "seed {seed}: final {ratio:.2}x the floor");
     }
 }

@@ -113,6 +113,24 @@ impl Case {
         }
     }
 
+    /// A case of `effects` on `protocol` whose truths are set by the caller (the fields left
+    /// `None` here).
+    fn of(seed: u64, protocol: Protocol, effects: Vec<&'static str>) -> Self {
+        Self {
+            seed,
+            protocol,
+            effects,
+            hysteresis: None,
+            creep: None,
+            static_map: None,
+            sensor_gain: None,
+            offset_v: None,
+            delay_s: None,
+            slew_v_per_s: None,
+            mode: None,
+        }
+    }
+
     /// The truth forms, for the per-form table.
     fn forms(&self) -> Vec<&'static str> {
         let mut v = Vec::new();
@@ -780,17 +798,9 @@ fn creep_counted_from_the_first_input_is_not_a_sensor_offset() {
             effects.push("offset");
         }
         let case = Case {
-            seed,
-            protocol,
-            effects,
-            hysteresis: None,
             creep: Some(creep),
-            static_map: None,
-            sensor_gain: None,
             offset_v,
-            delay_s: None,
-            slew_v_per_s: None,
-            mode: None,
+            ..Case::of(seed, protocol, effects)
         };
         let data = case.records();
         let d = diagnose(&base, &data, &Options::default()).expect("diagnosis");
@@ -880,17 +890,9 @@ fn a_creep_and_a_loop_together_are_both_named() {
         let hysteresis = Hysteresis::draw(&mut rng);
         let creep = Creep::draw(&mut rng);
         let case = Case {
-            seed,
-            protocol,
-            effects: vec!["drift", "hysteresis"],
             hysteresis: Some(hysteresis),
             creep: Some(creep),
-            static_map: None,
-            sensor_gain: None,
-            offset_v: None,
-            delay_s: None,
-            slew_v_per_s: None,
-            mode: None,
+            ..Case::of(seed, protocol, vec!["drift", "hysteresis"])
         };
         let data = case.records();
         let d = diagnose(&base, &data, &Options::default()).expect("diagnosis");
