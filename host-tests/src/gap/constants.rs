@@ -389,3 +389,18 @@ pub const OCCAM_SWAP_RATIO: f64 = 1.1;
 /// (families cases 1001, 1006, 1012, 1014, 1020, 1035, 1044, 1057, 1071: the rise split
 /// starts the relays below the records on, so it can leave more); 0.5 lies in the gap).
 pub const RISE_CHOICE_RATIO: f64 = 0.5;
+
+/// The least share of a record's output floor that its input's noise, carried through the
+/// base model, must reach to be looked at as a measured input's
+/// ([`super::input_noise::measured_input_noise`]; our assumption: a quarter adds 3 % to the
+/// floor in quadrature, within the floor estimate's own spread; a logged command's rounding
+/// is left out before, its noise read as no more than its rounding).
+pub const INPUT_NOISE_MIN_SHARE: f64 = 0.25;
+
+/// The share of the correlation the output would show with the input's own noise (through
+/// the base model), had that noise driven the stage, below which the noise counts as the
+/// measurement's ([`super::input_noise::measured_input_noise`]; measured on the test's
+/// records and two CLI sines: 0.016-0.14 where it is the measurement's, 0.73-1.0 where it
+/// drove the stage (the full thesis stage; a linear one with a delay or a pole the model
+/// lacks); our assumption: 0.3, near the two ranges' geometric middle).
+pub const INPUT_NOISE_FOLLOWED: f64 = 0.3;

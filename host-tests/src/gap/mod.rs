@@ -46,7 +46,8 @@
 //! # Where each part lives
 //! * [`constants`]: the workflow's thresholds (our assumptions, each with its reason);
 //! * [`data`]: the records as the workflow sees them, their noise floor, simulation of a model
-//!   on them (steps 1 and 2);
+//!   on them (steps 1 and 2); [`input_noise`]: a measured input's noise, which the model
+//!   carries into the residual (step 2);
 //! * [`signatures`]: the localisation in time and frequency (step 3);
 //! * [`catalogue`]: the effects, how each sits in the model file, its bounds;
 //! * [`fast_fit`] and [`slow_fit`] (with [`nnls`], the sign-constrained solve): the fits of
@@ -65,6 +66,7 @@ pub mod data;
 pub mod demo;
 pub mod everett;
 pub mod fast_fit;
+pub mod input_noise;
 pub mod mains;
 pub mod nnls;
 pub mod protocol;

@@ -24,6 +24,7 @@ use super::data::{
 };
 use super::everett::CentreLine;
 use super::fast_fit::fit_fast;
+use super::input_noise;
 use super::mains::{self, HumLine};
 use super::signatures::{self, shows_share};
 use super::slow_fit::{SlowRegressors, fit_slow, slow_regressors, solve_rows};
@@ -102,8 +103,9 @@ pub struct Diagnosis {
     pub record_noise_v: Vec<f64>,
     /// For each record whose noise is coloured or below its resolution, how its floor was
     /// found ([`super::data::NoiseFloor::note`]), each record's glitches, replaced before the
-    /// fits ([`super::data::without_glitches`]), and its mains interference, taken out before
-    /// them ([`super::mains::note`]).
+    /// fits ([`super::data::without_glitches`]), its mains interference, taken out before
+    /// them ([`super::mains::note`]), and a measured input's noise that its floor holds
+    /// ([`super::input_noise::InputNoise::note`]).
     pub noise_notes: Vec<String>,
     /// Each record's glitches, replaced before the fits: (sample index, value it was
     /// replaced by) ([`super::data::glitches`]; [`Diagnosis::cleaned`] applies them).
@@ -686,11 +688,30 @@ pub fn diagnose(base: &ModelFile, data: &[Data], opts: &Options) -> anyhow::Resu
             );
         }
     }
+    // (a measured input's noise, which the model fed it carries into the residual and the
+    // output does not show, is part of the floor: `input_noise`)
+    // (the refusals below judge the output on its own floor: a raised one would make them
+    // less keen)
+    let output_noise = noise.clone();
+    let noise: Vec<f64> = par_map(&(0..data.len()).collect::<Vec<_>>(), |&i| {
+        input_noise::measured_input_noise(base, &data[i], &base_sims[i], &floors[i])
+    })
+    .into_iter()
+    .zip(data)
+    .zip(noise)
+    .map(|((m, d), f)| match m {
+        Some(m) => {
+            noise_notes.push(m.note(&d.name));
+            m.floor_v
+        }
+        None => f,
+    })
+    .collect();
     let var: Vec<f64> = noise.iter().map(|s| (s * s).max(1e-14)).collect();
     let noise_floor_v = (var.iter().sum::<f64>() / var.len() as f64).sqrt();
     // (a record clipped by its sensor or logger is refused on its own samples: the cleaning
     // below moves them)
-    for ((d, s), f) in data.iter().zip(&base_sims).zip(&noise) {
+    for ((d, s), f) in data.iter().zip(&base_sims).zip(&output_noise) {
         if let Some((level, count, past_v)) = clipped(&d.y_v, s, *f) {
             bail!(
                 "record {}: its output reads exactly {level:.4} V at {count} samples ({:.1} % \
@@ -739,7 +760,7 @@ pub fn diagnose(base: &ModelFile, data: &[Data], opts: &Options) -> anyhow::Resu
         })
         .collect();
     let data: &[Data] = &cleaned;
-    for ((d, s), f) in data.iter().zip(&base_sims).zip(&noise) {
+    for ((d, s), f) in data.iter().zip(&base_sims).zip(&output_noise) {
         if let Some(m) = not_following(&d.y_v, s, *f) {
             bail!(
                 "record {}: its output does not follow the model's (correlation {:.2} between \
