@@ -1580,8 +1580,11 @@ fn glitches_of_the_recording_are_replaced_and_said() {
 /// The mains' hum on a lab's records (2 mV RMS at 50.02 Hz and 1 mV at its second harmonic,
 /// a rectifier's, on the identification protocol's records beside the thesis' 2.5 mV of
 /// noise), with the full thesis stage and a +20 mV sensor offset. On the 40 s slow record the
-/// hum is taken out and said, and that record ends where it ends without hum (within 3 %;
-/// 2.2 mV of hum left in it would add 30 % in quadrature), with the same names: its three
+/// hum is taken out and said, and that record ends where it ends without hum (within 5 %;
+/// 2.2 mV of hum left in it would add 30 % in quadrature; measured 2.66 against 2.60 mV
+/// until session 28, 2.66 against 2.57 since session 29, whose settled K'(u) moved the
+/// record without hum and not the one with it, the two fits taking their steps in another
+/// order), with the same names: its three
 /// slow effects, the slew limit and the offset. The 0.2 s fast record keeps its hum: around
 /// 50 Hz its residual from the base model is the steps' misfit, broadband and as strong, and
 /// the line does not stand out of it (the rule takes no line it cannot tell).
@@ -1625,7 +1628,7 @@ fn mains_hum_is_the_measurements_not_the_stages() {
     assert_eq!(d.named, without.named);
     let (slow, slow_without) = (d.record_final_rms_v[1], without.record_final_rms_v[1]);
     assert!(
-        (slow / slow_without - 1.0).abs() <= 0.03,
+        (slow / slow_without - 1.0).abs() <= 0.05,
         "slow record {:.3} mV, without hum {:.3} mV",
         1e3 * slow,
         1e3 * slow_without

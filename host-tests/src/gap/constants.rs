@@ -56,6 +56,17 @@ pub const STRUCTURE_ROUNDS: usize = 2;
 /// The same for ranking a step's candidates (one round: the second is most of the cost and
 /// ranks them alike).
 pub const CANDIDATE_ROUNDS: usize = 1;
+/// Most rounds of the slow fit (`slow_fit::fit_slow`) where the set has K'(u) beside the drift's K
+/// (its held levels): K' and K trade, and one round leaves K' at a step of an oscillation
+/// (measured: the full thesis stage on random levels, 2 kHz, 20 s, seed 44, K' on the play
+/// sum after each round beside a scale: its scale 0.84, 1.01, 0.92, 0.96, 0.94; without the
+/// scale, the curvature's candidate explained 50 % of what drift and hysteresis left after
+/// one round and 92 % settled, and the step named a false `sensor-gain` in its place; our
+/// assumption: five rounds take an oscillation halving each round to a thirtieth).
+pub const COUPLE_ROUNDS_MAX: usize = 5;
+/// K'(u) is settled where a round moved it less than this at either end of the inputs' span
+/// (our assumption: a ten-thousandth of 10 V is 1 mV, the records' noise).
+pub const COUPLE_SETTLED: f64 = 1e-4;
 /// The knees tried for the drift's K(u), as fractions of the inputs' span from its low end:
 /// K is held above the knee (our assumption: the thesis fitted its cubic K on 1..6 V steps of
 /// a 10 V range, sec. 5.2, and a cubic turns steeply beyond the steps it was fitted on; the

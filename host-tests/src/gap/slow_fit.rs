@@ -13,7 +13,8 @@
 
 use super::catalogue::{self, SlowParams};
 use super::constants::{
-    DRIFT_KNEES, DRIFT_REFINE_ITERATIONS, DRIFT_REFINE_TOL_V2, DRIFT_TAU_MAX_RECORDS, SETTLE_S,
+    COUPLE_ROUNDS_MAX, COUPLE_SETTLED, DRIFT_KNEES, DRIFT_REFINE_ITERATIONS, DRIFT_REFINE_TOL_V2,
+    DRIFT_TAU_MAX_RECORDS, SETTLE_S,
 };
 use super::data::{Data, sim};
 use super::everett::{self, HYST_COLS, HYST_FIT_COLS, HystFit};
@@ -764,10 +765,28 @@ pub(super) fn fit_slow(
         ..Shape::default()
     };
     // The later rounds are for the drift's K (its time constants found with K = 1 are off
-    // until K is known); K'(u) on the play sum alone settles in one (session 14).
+    // until K is known); K'(u) on the play sum alone settles in one (session 14). Beside the
+    // drift's K it need not: the two trade, and K' after one round is a step of an
+    // oscillation (`COUPLE_ROUNDS_MAX`), so the rounds go on until K' settles.
     let rounds = if has_drift { rounds } else { rounds.min(1) };
-    for _ in 0..rounds {
+    let max_rounds = if couple && has_drift {
+        rounds.max(COUPLE_ROUNDS_MAX)
+    } else {
+        rounds
+    };
+    let kprime_at =
+        |g: Option<(f64, f64)>, u: f64| g.map_or(1.0, |(c1, c2)| 1.0 + u * (c1 + u * c2));
+    for round in 0..max_rounds {
         if couple {
+            // (settled: K' moved less than `COUPLE_SETTLED` at either end of the span in the
+            // last round)
+            if round >= rounds
+                && [u_range.0, u_range.1].iter().all(|&u| {
+                    (kprime_at(p.gain, u) - kprime_at(shape.kprime, u)).abs() < COUPLE_SETTLED
+                })
+            {
+                break;
+            }
             shape.kprime = p.gain;
         }
         // The regressors with this round's K'(u) and K = 1, their Gram matrix computed once:
