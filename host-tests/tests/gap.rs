@@ -792,6 +792,50 @@ fn the_thesis_stage_on_random_levels_names_its_loop_beside_its_drift() {
     }
 }
 
+/// The full thesis stage on random levels with few long holds (1.5-3 s), drawn after
+/// session 29's two changes were made on other records (seeds 44 and 50): its rises went to
+/// high levels, so no record's held levels could tell a loop from a static shape
+/// (`Signatures::held_loop_untold`), and the loop was never admitted (seed 54: `drift` alone
+/// at 69x the floor, seed 55 at 55x); K'(u) beside the drift's K took one round (seed 56:
+/// 2.60x, its curvature missed). Measured after: 1.52, 1.00 and 1.01x with drift and
+/// hysteresis named and nothing the stage lacks; the test asserts those and the issue's 2x
+/// for a single record.
+#[test]
+fn the_thesis_stage_on_few_long_holds_names_its_loop() {
+    use host_tests::sim::synth::{Protocol, SynthSpec, synth};
+    let base = ModelFile::built_in("thesis-linear").unwrap();
+    let cases: [(u64, f64, f64, f64, f64, f64); 3] = [
+        // (seed, seconds, rate Hz, lowest input V, span V, hold s)
+        (54, 24.0, 4_000.0, 1.0, 8.0, 3.0),
+        (55, 16.0, 2_000.0, 0.5, 9.0, 1.6),
+        (56, 30.0, 1_000.0, 0.0, 9.0, 1.5),
+    ];
+    for (seed, seconds, rate, offset, amplitude, hold) in cases {
+        let spec = SynthSpec {
+            model: "thesis-full".into(),
+            protocol: Protocol::Steps,
+            seed,
+            seconds,
+            rate,
+            amplitude,
+            offset,
+            freq: 1.0,
+            freq_end: 100.0,
+            hold: Some(hold),
+            noise_v: None,
+        };
+        let data = vec![Data::from_record("steps.csv", synth(&spec).unwrap()).unwrap()];
+        let d = diagnose(&base, &data, &Options::default()).unwrap();
+        let ratio = d.final_rms_v / d.noise_floor_v;
+        println!(
+            "seed {seed}: named {:?}, final {ratio:.2}x the floor",
+            d.named
+        );
+        assert_thesis_stage_names(&d, &["drift", "hysteresis"], &format!("seed {seed}: "));
+        assert!(ratio <= 2.0, "seed {seed}: final {ratio:.2}x the floor");
+    }
+}
+
 /// Issue #12's requirement on the full thesis stage: its identification records (150 s slow
 /// record, `piezo synth --model thesis-full --protocol identification --seconds 150`, noise
 /// seeds 1-5) diagnosed from `thesis-linear` name drift, hysteresis and nonlinear-gain, no
