@@ -55,11 +55,14 @@ pub struct Signatures {
     /// records of steps alone (no input that moves slowly), volts: the residual of each
     /// hold's second half fitted to a static quadratic and the direction of the step into it.
     pub held_loop_v: f64,
-    /// Whether a record of steps alone holds enough levels for that loop, but its levels
-    /// reached from below and from above sit at inputs that their static shape cannot be
-    /// told from the direction at (`held_loop_v` reads nothing there, loop or none; random
-    /// levels whose rises all went high).
+    /// Whether a record of steps alone holds enough levels for that loop, reached each way,
+    /// but the direction of the step into each follows from its level (the levels reached
+    /// from below all at one end): its held levels give no answer, loop or none.
     pub held_loop_untold: bool,
+    /// Whether some record answered the loop's question, whatever the size of its answer: a
+    /// slowly moving input's rising/falling gap (`loop_v`) or a held levels' gap
+    /// (`held_loop_v`).
+    pub loop_answered: bool,
     /// Curvature of the residual against the input (largest deviation from the chord), volts.
     pub curve_v: f64,
     /// Input span (min, max), volts.
@@ -86,14 +89,27 @@ pub struct Signatures {
 /// mode damped by 0.02 at 3 kHz, whose line is 120 Hz wide, spans a few 49 Hz bins).
 pub const WELCH_SEGMENT: usize = 1024;
 
-/// The loop of a record's held levels (`None` with fewer than [`HELD_LOOP_MIN_HOLDS`] holds
-/// of [`HELD_LOOP_MIN_S`] or more after a step ([`Data::holds_of`]), or fewer than two
-/// reached each way): the residual's mean over each hold's second half (settled), fitted by
+/// What a record's held levels say of a loop ([`held_loop_v`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum HeldLoop {
+    /// The gap between levels reached from below and from above, volts.
+    Gap(f64),
+    /// Too few holds, too few reached each way or at distinct levels: nothing to ask.
+    TooFew,
+    /// Enough holds, but the direction of the step into each follows from its level (the
+    /// levels reached from below all at one end): no answer, loop or none.
+    Untold,
+}
+
+/// The loop of a record's held levels ([`HeldLoop::TooFew`] with fewer than
+/// [`HELD_LOOP_MIN_HOLDS`] holds of [`HELD_LOOP_MIN_S`] or more after a step
+/// ([`Data::holds_of`]), or fewer than two reached each way): the residual's mean over each
+/// hold's second half (settled), fitted by
 /// least squares to a static quadratic in the input plus `g` times the direction of the step
 /// into the hold (+1 up, -1 down); the loop is `2 |g|`, the gap between levels reached from
 /// below and from above at equal input. The quadratic takes a scale, an offset or a curvature
 /// of the static map, which do not depend on the direction.
-fn held_loop_v(d: &Data, r: &[f64]) -> Option<f64> {
+fn held_loop_v(d: &Data, r: &[f64]) -> HeldLoop {
     let mut pts: Vec<(f64, f64, f64)> = Vec::new();
     for h in d.holds_of(HELD_LOOP_MIN_S) {
         let step = d.u_v[h.start] - d.u_v[h.start - 1];
@@ -104,7 +120,7 @@ fn held_loop_v(d: &Data, r: &[f64]) -> Option<f64> {
     }
     let ups = pts.iter().filter(|p| p.2 > 0.0).count();
     if pts.len() < HELD_LOOP_MIN_HOLDS || ups < 2 || pts.len() - ups < 2 {
-        return None;
+        return HeldLoop::TooFew;
     }
     // The direction's coefficient by its part the static quadratic does not explain (the
     // quadratic in the standardised input, so that it is well conditioned): where a few
@@ -115,7 +131,7 @@ fn held_loop_v(d: &Data, r: &[f64]) -> Option<f64> {
     let mu = pts.iter().map(|p| p.0).sum::<f64>() / n;
     let sd = (pts.iter().map(|p| (p.0 - mu).powi(2)).sum::<f64>() / n).sqrt();
     if sd.is_nan() || sd <= 0.0 {
-        return None;
+        return HeldLoop::TooFew;
     }
     let x = DMatrix::from_fn(pts.len(), 3, |i, j| {
         let z = (pts[i].0 - mu) / sd;
@@ -126,19 +142,24 @@ fn held_loop_v(d: &Data, r: &[f64]) -> Option<f64> {
     let mut zs: Vec<f64> = pts.iter().map(|p| (p.0 - mu) / sd).collect();
     zs.sort_by(f64::total_cmp);
     if 1 + zs.windows(2).filter(|w| w[1] - w[0] > 0.01).count() < 3 {
-        return None;
+        return HeldLoop::TooFew;
     }
-    let c = (x.transpose() * &x)
-        .cholesky()?
-        .solve(&(x.transpose() * &dir));
+    let Some(chol) = (x.transpose() * &x).cholesky() else {
+        return HeldLoop::TooFew;
+    };
+    let c = chol.solve(&(x.transpose() * &dir));
     let e = &dir - &x * c;
     let ee = e.dot(&e);
     if ee < HELD_LOOP_MIN_DIR_SHARE * n {
-        return None;
+        return HeldLoop::Untold;
     }
     let y = DVector::from_iterator(pts.len(), pts.iter().map(|p| p.1));
     let g = e.dot(&y) / ee;
-    g.is_finite().then(|| 2.0 * g.abs())
+    if g.is_finite() {
+        HeldLoop::Gap(2.0 * g.abs())
+    } else {
+        HeldLoop::TooFew
+    }
 }
 
 /// The signatures of the residuals `y - sims`.
@@ -236,12 +257,16 @@ pub fn compute(data: &[Data], sims: &[Vec<f64>], noise: &[f64]) -> Signatures {
         // A record of steps alone (random levels) never moves slowly: its loop shows in the
         // held levels instead, a level reached from below sitting apart from one reached
         // from above.
-        if !moving_loop {
+        if moving_loop {
+            s.loop_answered = true;
+        } else {
             match held_loop_v(d, &r) {
-                Some(gap) => s.held_loop_v = s.held_loop_v.max(gap),
-                None => {
-                    s.held_loop_untold |= d.holds_of(HELD_LOOP_MIN_S).len() >= HELD_LOOP_MIN_HOLDS
+                HeldLoop::Gap(gap) => {
+                    s.held_loop_v = s.held_loop_v.max(gap);
+                    s.loop_answered = true;
                 }
+                HeldLoop::Untold => s.held_loop_untold = true,
+                HeldLoop::TooFew => {}
             }
         }
         if xs.len() >= 50 {
@@ -418,17 +443,20 @@ impl Signatures {
             // and the held levels' gap is judged alone: a stage that creeps and has a loop
             // (every piezo stage; the full thesis stage on random levels) shows both, and
             // the loop was never admitted (41-55x the floor, `drift` alone).
-            // Where no record's held levels can tell a loop from a static shape (levels
-            // reached from below all at one end), they are no evidence either way: beside a
-            // drift the loop is then left to the fit (the full thesis stage on random levels
-            // whose three rises all went above 8 V named an `offset` of 1.37 V alone at 63x
-            // the floor, while the table explained 99.9 % of what a drift left).
+            // Where the held levels cannot tell a loop from a static shape (the levels
+            // reached from below all at one end) and no record answered otherwise, they are
+            // no evidence either way: beside a drift the loop is then left to the fit (the
+            // full thesis stage on random levels whose three rises all went above 8 V named
+            // an `offset` of 1.37 V alone at 63x the floor, while the table explained 99.9 %
+            // of what a drift left).
             "hysteresis" => {
                 self.loop_v >= HYST_LOOP_MIN_NOISE * self.noise_v
-                    || ((self.held_loop_v >= HYST_LOOP_MIN_NOISE * self.noise_v
-                        || (self.held_loop_untold && self.held_loop_v == 0.0))
+                    || (self.held_loop_v >= HYST_LOOP_MIN_NOISE * self.noise_v
                         && (self.tail_v < DRIFT_TAIL_MIN_NOISE * self.noise_v
                             || catalogue::present(model, "drift")))
+                    || (self.held_loop_untold
+                        && !self.loop_answered
+                        && catalogue::present(model, "drift"))
             }
             // Holds that show no tail show no creep (without holds the selection's give-way
             // rule asks the static shapes instead).
@@ -634,19 +662,24 @@ mod tests {
     fn held_levels_show_a_loop_of_steps_alone() {
         let levels = [2.0, 5.0, 3.0, 7.0, 4.0, 8.0, 1.0, 6.0];
         let (d, r) = steps(&levels, 0.02);
-        let gap = held_loop_v(&d, &r).unwrap();
-        assert!((gap - 0.04).abs() < 1e-9, "gap {gap}");
+        let gap = |h: HeldLoop| match h {
+            HeldLoop::Gap(g) => g,
+            other => panic!("{other:?}"),
+        };
+        let g = gap(held_loop_v(&d, &r));
+        assert!((g - 0.04).abs() < 1e-9, "gap {g}");
         let (d, r) = steps(&levels, 0.0);
-        let gap = held_loop_v(&d, &r).unwrap();
-        assert!(gap < 1e-9, "gap {gap}");
+        let g = gap(held_loop_v(&d, &r));
+        assert!(g < 1e-9, "gap {g}");
         let (d, r) = steps(&levels[..4], 0.02);
-        assert!(held_loop_v(&d, &r).is_none(), "three steps");
+        assert_eq!(held_loop_v(&d, &r), HeldLoop::TooFew, "three steps");
         let (d, r) = steps(&[1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0], 0.02);
-        assert!(held_loop_v(&d, &r).is_none(), "rising only");
-        // Levels each reached one way only: the direction follows from the level.
+        assert_eq!(held_loop_v(&d, &r), HeldLoop::TooFew, "rising only");
+        // Two levels each reached one way only: too few distinct levels to ask.
         let (d, r) = steps(&[2.3, 7.1, 2.3, 7.1, 2.3, 7.1, 2.3, 7.1], 0.0);
-        assert!(held_loop_v(&d, &r).is_none(), "square wave");
+        assert_eq!(held_loop_v(&d, &r), HeldLoop::TooFew, "square wave");
+        // Three levels, each reached one way only: the direction follows from the level.
         let (d, r) = steps(&[0.0, 5.0, 10.0, 0.0, 5.0, 10.0, 0.0, 5.0, 10.0], 0.0);
-        assert!(held_loop_v(&d, &r).is_none(), "0-5-10-0 cycle");
+        assert_eq!(held_loop_v(&d, &r), HeldLoop::Untold, "0-5-10-0 cycle");
     }
 }

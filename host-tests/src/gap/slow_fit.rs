@@ -778,12 +778,14 @@ pub(super) fn fit_slow(
         |g: Option<(f64, f64)>, u: f64| g.map_or(1.0, |(c1, c2)| 1.0 + u * (c1 + u * c2));
     for round in 0..max_rounds {
         if couple {
-            // (settled: K' moved less than `COUPLE_SETTLED` at either end of the span in the
-            // last round)
+            // (settled: K' moved less than `COUPLE_SETTLED` at both ends of the span and its
+            // middle in the last round)
             if round >= rounds
-                && [u_range.0, u_range.1].iter().all(|&u| {
-                    (kprime_at(p.gain, u) - kprime_at(shape.kprime, u)).abs() < COUPLE_SETTLED
-                })
+                && [u_range.0, 0.5 * (u_range.0 + u_range.1), u_range.1]
+                    .iter()
+                    .all(|&u| {
+                        (kprime_at(p.gain, u) - kprime_at(shape.kprime, u)).abs() < COUPLE_SETTLED
+                    })
             {
                 break;
             }
