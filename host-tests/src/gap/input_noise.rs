@@ -40,7 +40,7 @@
 //! can hide a small fast effect.
 
 use super::constants::{INPUT_NOISE_FOLLOWED, INPUT_NOISE_MIN_SHARE};
-use super::data::{Data, NoiseFloor, noise_floor_of, sim};
+use super::data::{Data, NoiseFloor, mse, noise_floor_of, sim};
 use crate::io::model_file::ModelFile;
 use model_core::params;
 use rand::SeedableRng;
@@ -116,8 +116,7 @@ pub fn measured_input_noise(
     let mut rng = rand::rngs::StdRng::seed_from_u64(DRAW_SEED);
     let drawn = d.u_v.iter().map(|u| u + normal.sample(&mut rng)).collect();
     let y2 = sim(model, &with_input(drawn)).ok()?;
-    let carried: Vec<f64> = y2.iter().zip(model_y).map(|(a, b)| a - b).collect();
-    let carried_v = (carried.iter().map(|c| c * c).sum::<f64>() / carried.len() as f64).sqrt();
+    let carried_v = mse(&y2, model_y).sqrt();
     if !carried_v.is_finite() || carried_v < INPUT_NOISE_MIN_SHARE * y_floor.sigma_v {
         return None;
     }

@@ -774,8 +774,15 @@ pub(super) fn fit_slow(
     } else {
         rounds
     };
-    let kprime_at =
-        |g: Option<(f64, f64)>, u: f64| g.map_or(1.0, |(c1, c2)| 1.0 + u * (c1 + u * c2));
+    // (K' as the stage has it: `Shape::kprime`)
+    let kprime_at = |g: Option<(f64, f64)>, u: f64| {
+        Shape {
+            kprime: g,
+            range: u_range,
+            ..Shape::default()
+        }
+        .kprime(u)
+    };
     for round in 0..max_rounds {
         if couple {
             // (settled: K' moved less than `COUPLE_SETTLED` at both ends of the span and its
