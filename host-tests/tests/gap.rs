@@ -1086,7 +1086,10 @@ fn single_sine_outcomes(seeds: &[u64]) -> Vec<(u64, Vec<String>, f64)> {
 
 /// What the workflow achieves on the single-sine records today: hysteresis named and no
 /// effect the truth lacks (the offset may be named), within a bound per seed. Measured since
-/// session 25 (a drift that explains alike to the static shapes goes with them when no record
+/// session 30 (eleven bands along the centre axis for the band and rise splits, was four:
+/// `everett::HYST_BANDS_BAND`): seed 21 hysteresis alone at 1.93x, seed 22 at 1.30x; the
+/// offsets still not named (the scale, the curvature and the drift explain alike beside the
+/// table: reported as pairs). The bounds fail on four bands (4.88x on seed 21). Session 25 (a drift that explains alike to the static shapes goes with them when no record
 /// holds, instead of being named in their place): seed 21 hysteresis alone at 4.88x, seed
 /// 22 hysteresis alone at 1.34x (the issue's 2x), the 25.5 and 21.3 mV offsets not named and
 /// reported, with the scale, the curvature and the drift, as ones the records cannot tell.
@@ -1108,7 +1111,7 @@ fn single_sine_outcomes(seeds: &[u64]) -> Vec<(u64, Vec<String>, f64)> {
 fn single_sine_record_names_hysteresis_and_its_start() {
     // (seed, bound on the final residual over the floor: the measured figure with a margin
     // of about a tenth, and the issue's 2x where it is met)
-    let bounds = [(21, 5.5), (22, 2.0)];
+    let bounds = [(21, 2.2), (22, 1.5)];
     let outcomes = single_sine_outcomes(&bounds.map(|b| b.0));
     for ((seed, named, ratio), (_, bound)) in outcomes.into_iter().zip(bounds) {
         assert!(
@@ -1129,7 +1132,9 @@ fn single_sine_record_names_hysteresis_and_its_start() {
 }
 
 /// Issue #12's requirement on the single-sine record: hysteresis and offset named, the
-/// residual within 2x its floor, on eight seeds. Not met yet. Session 25: hysteresis alone on
+/// residual within 2x its floor, on eight seeds. Not met yet. Session 30 (eleven bands):
+/// hysteresis alone on all eight, no false name, final 1.30-2.43x the floor, under 2x on six
+/// (21, 22, 24, 25, 27, 28); the offset named on none (the look-alikes as before). Session 25: hysteresis alone on
 /// all eight, no false name, final 1.34-5.76x the floor (median 4.8x), under 2x on 22 only;
 /// the offset, the scale, the curvature and the drift each explain alike beside the table
 /// (reported as pairs the records cannot tell; the offset also by the standing note that no
@@ -1147,7 +1152,7 @@ fn single_sine_record_names_hysteresis_and_its_start() {
 /// (half a grid interval, 0.11 V) are smeared over it. Run with `--ignored`; it prints every
 /// seed's outcome before it fails.
 #[test]
-#[ignore = "issue #12: not met yet (offset named on 0 of 8 seeds, 1.34-5.76x the floor)"]
+#[ignore = "issue #12: not met yet (offset named on 0 of 8 seeds, 1.30-2.43x the floor)"]
 fn single_sine_record_names_hysteresis_and_offset() {
     let seeds: Vec<u64> = std::env::var("SINE_SEEDS").map_or(SINGLE_SINE_SEEDS.to_vec(), |s| {
         s.split(',').map(|x| x.parse().unwrap()).collect()

@@ -519,10 +519,13 @@ fn run_suite() -> Option<Tally> {
 
 /// What the workflow holds on the drawn cases today, as a guard against regressions (the
 /// test command runs it and prints the confusion table): no name on a clean record, and at
-/// least 80 % exact named sets with at most 6.3 % false names, in release with the default
-/// 100 cases (`GAP_CASES` unset). Measured in session 25 (ci profile, 2 cores, 250 s): 83.0 %
-/// exact, 5 false names of 112 (4.5 %), 0 of 15 clean cases named, 93 exact or honest (no
-/// false name, every missed effect in a reported pair) (session 24: 82.0 % and 6 of 112,
+/// least 79 % exact named sets with at most 5.5 % false names, in release with the default
+/// 100 cases (`GAP_CASES` unset). Measured in session 30 (ci profile, 2 cores, 320 s: eleven
+/// bands for the band and rise splits, `everett::HYST_BANDS_BAND`): 82.0 % exact, 4 false
+/// names of 110 (3.6 %), 0 of 15 clean cases named, 92 exact or honest (no false name, every
+/// missed effect in a reported pair); the loops fitted closer (median final residual of the
+/// 33 cases with a loop 6.6x -> 3.7x the floor). Session 25 (235 s): 83.0 % exact, 5 false
+/// names of 112 (4.5 %), 93 exact or honest (session 24: 82.0 % and 6 of 112,
 /// before a drift explaining alike went with the look-alike shapes on records without holds,
 /// and 1006's true scale stayed against a curvature's better score; session 23: 83.0 % and
 /// 6 of 113, before the rise split took 1068's loop and left its curvature alike to a scale
@@ -536,10 +539,10 @@ fn run_suite() -> Option<Tally> {
 fn randomised_families_hold_their_measured_rates() {
     let full_run = std::env::var("GAP_CASES").is_err();
     suite_meets(
-        80.0,
-        6.3,
+        79.0,
+        5.5,
         full_run,
-        "the measured 83 % and 4.5 % with their margins",
+        "the measured 82 % and 3.6 % with their margins",
     );
 }
 
@@ -567,7 +570,7 @@ fn suite_meets(exact_pct: f64, false_pct: f64, rates: bool, what: &str) {
 }
 
 /// Issue #12's requirements on 100 drawn cases: >= 95 % exact named sets, <= 1 % false names
-/// (of the names given), no name on a clean record. Not met: 83.0 % exact and 4.5 % false
+/// (of the names given), no name on a clean record. Not met: 82.0 % exact and 3.6 % false
 /// names (see the test above and `host-tests/GAP.md`); most failures are a loop of another
 /// form (Bouc-Wen, Duhem) on a sine or a chirp beside a static shape the records cannot tell
 /// from the table's misfit.
@@ -860,11 +863,16 @@ fn creep_counted_from_the_first_input_is_not_a_sensor_offset() {
 /// tail: the random-levels cases named `drift` with a false `nonlinear-gain` (4001, 63x) or
 /// nothing (4003, 4005, 4007 at 122-256x). Now the loop is admitted beside a drift in the
 /// model, and a creep and a loop are offered as one step where the gap stands clear of the
-/// tails (4007: drift alone explained nothing). Measured: hysteresis named on all 16, drift on
-/// 14 (not on 4003, 4013), 4 false names (a `nonlinear-gain` or `sensor-gain` beside a loop
-/// of another form), 10 exact; the identification cases' Duhem loops that run backwards
-/// after reversals end at 41-108x (their misfit, as in the suite). Asserted at those counts:
-/// a guard, not the issue's figure.
+/// tails (4007: drift alone explained nothing). Measured in session 28: hysteresis named on
+/// all 16, drift on 14 (not on 4003, 4013), 4 false names, 10 exact. Session 30 (eleven bands
+/// along the relay centres, and a drift whose removal brings its tails back kept by the final
+/// check and the swaps, `select::tails_back`): hysteresis and drift on all 16, 4 false names
+/// (a `nonlinear-gain` or `sensor-gain` beside a loop of another form: 4001, 4005, 4014,
+/// 4015), 12 exact; with the eleven bands alone the drift went on 4011 and 4015 (taken out
+/// after an offset the loop had traded for, with tails of 61 and 76 mV back) and on 4003 (a
+/// curvature swapped in). The identification cases' Duhem loops that run backwards after
+/// reversals end at 42-101x (their misfit, as in the suite). Asserted at those counts: a
+/// guard, not the issue's figure.
 #[test]
 fn a_creep_and_a_loop_together_are_both_named() {
     if cfg!(debug_assertions) {
@@ -927,7 +935,11 @@ fn a_creep_and_a_loop_together_are_both_named() {
     );
     if only.is_none() {
         assert_eq!(loops, seeds.len(), "{report}");
-        assert!(creeps >= 14, "drift named on {creeps} of 16\n{report}");
+        assert_eq!(
+            creeps,
+            seeds.len(),
+            "drift named on {creeps} of 16\n{report}"
+        );
         assert!(false_names <= 4, "{false_names} false names\n{report}");
     }
 }
