@@ -84,7 +84,8 @@ pub fn param_count(effect: &str) -> usize {
         "resonance" => 2,
         // Three gains, three time constants and K(u)'s k1..k3.
         "drift" => 9,
-        // The basis has 64 weights, tied along the range by the smoothness penalty: what the
+        // The basis has a weight per radius and band, tied along the range by the smoothness
+        // penalty: what the
         // records can set freely is about one weight per radius used, which a large loop
         // puts at eight (our assumption, the play form's count before the bands).
         "hysteresis" => params::PLAY_OPERATORS,

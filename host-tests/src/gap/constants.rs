@@ -186,7 +186,7 @@ pub const DRIFT_TAIL_MIN_NOISE: f64 = 3.0;
 /// PI or Duhem loop on random levels (seeds 4011, 4015) lost their drift at 1.67x against its
 /// 2.62x bar after the final check took out an offset the loop's refit had traded for, with
 /// tails of 61 and 76 mV back; on 4003 a curvature was swapped in for a drift whose tails
-/// were 51 mV. With it, drift on 16 of 16 (14 before).
+/// were 51 mV. With it, drift on 16 of 16 (14 before, 12 with eleven bands alone: 4013 too).
 pub const DRIFT_TAIL_KEEP_NOISE: f64 = 10.0;
 /// The joint step of a creep and a loop (`select::creep_and_loop`) is offered where the held
 /// levels sit apart by the direction of the step into them by at least this many times the

@@ -45,7 +45,7 @@
 //! change along the range (`+ s_k |[b, a] ^ band_k|` in `E`). Without it, the curvature a
 //! non-Preisach loop (Bouc-Wen) leaves in the reversible part is named `nonlinear-gain`; with
 //! it, `nonlinear-gain` is named beside `hysteresis` only when the records show a curvature the
-//! table's four slopes cannot take (a stage's K'(u) and its Everett table are one static map
+//! table's per-band slopes cannot take (a stage's K'(u) and its Everett table are one static map
 //! to any record: the workflow says so in GAP.md rather than guess).
 //!
 //! # The span split's triangle (session 19)
@@ -112,7 +112,7 @@ pub const HYST_BANDS: usize = HYST_BANDS_SPAN;
 ///   (seeds 7001-7008): 1.9-28.6x (four bands: 3.1-43x);
 /// * families suite: 82 exact of 100, 4 false names of 110 (four: 83, 5 of 112), the loops of
 ///   every form fitted closer (on the 33 cases with a loop the median final residual went
-///   from 6.6x to 3.7x the floor, lower on 28 and higher on 3), at 1.5x the time per case;
+///   from 6.6x to 3.7x the floor, lower on 28 and higher on 3), at 1.4x the time per case;
 /// * hidden-effect suite unchanged (92/92, 0 false), gap bench +0.4 s.
 ///
 /// Before session 30 the split had four: eleven had then given five Bouc-Wen cases of the
@@ -255,7 +255,8 @@ pub const HYST_BAND_SMOOTH: f64 = 0.1;
 /// at the base model's `static_gain * u` is that of one of the splits of the same relays,
 /// and the records choose (`select`: the split whose hysteresis alone fits them better, or,
 /// where the band and span splits fit within `CANNOT_TELL_RATIO`, the one whose diagnosis
-/// names fewer effects; the rise split where it leaves far less than the band split).
+/// explains every record where only one does, else the one naming fewer effects; the rise
+/// split where it leaves far less than the band split).
 ///
 /// * [`CentreLine::Band`]: each band's relays less their reversible part `clamp(u, band)`.
 ///   A Prandtl-Ishlinskii truth is exactly that (its play operators less `u`), and so is its
@@ -1173,9 +1174,10 @@ mod tests {
     /// candidates); the rise split's once-switching relays carry the difference. The basis
     /// alone (least squares with a constant, the relay weights non-negative) on the truth's
     /// noise-free output: truths not drawn by the single-sine test, radii off the basis'
-    /// own.
+    /// own. With four bands the band split could not fit that rise (2.4-2.6 mV against the
+    /// rise split's 0.9-1.1 mV); with eleven it can.
     #[test]
-    fn the_rise_split_fits_a_first_rise_the_band_split_cannot() {
+    fn the_rise_split_fits_a_first_rise_from_a_rest() {
         let rate = 2000.0;
         let n = 6000;
         let u: Vec<f64> = (0..n)
@@ -1229,14 +1231,20 @@ mod tests {
                 .fold(f64::INFINITY, f64::min);
             let rise = rms(CentreLine::Rise, &[], true);
             let rise_start_only = rms(CentreLine::Rise, &[], false);
-            // Measured: the band split from its best start 2.40 / 2.59 mV, the rise split's
-            // start without its once-switching columns 47.9 / 73.9 mV, the rise split 0.90 /
-            // 1.09 mV. Asserted: the rise split leaves under 0.6 of the band split's best (a
-            // third of its power), its columns are what does it (the start alone leaves ten
-            // times more), and it reaches below 1.5 mV, inside the 2x of a 1 mV floor
-            // (a misfit of 1.73 mV).
+            // Measured with four bands (before session 30): the band split from its best
+            // start 2.40 / 2.59 mV, the rise split's start without its once-switching columns
+            // 47.9 / 73.9 mV, the rise split 0.90 / 1.09 mV. With eleven bands
+            // (`HYST_BANDS_BAND`) the band split's best start fits the first rise as well:
+            // band 0.55 / 0.78 mV, rise start alone 31.5 / 48.8 mV, rise 0.70 / 0.66 mV.
+            // Asserted: the rise split reaches below 1.5 mV, inside the 2x of a 1 mV
+            // floor (a misfit of 1.73 mV), its once-switching columns are what does it (the
+            // start alone leaves ten times more), and it stays within 1.5x of the band split's
+            // best (the records choose between the two: `RISE_CHOICE_RATIO`).
+            println!(
+                "radii {radii:?}: band {band:.2e} V, rise start alone {rise_start_only:.2e} V, rise {rise:.2e} V"
+            );
             assert!(
-                rise < 0.6 * band && rise_start_only > 10.0 * rise && rise < 1.5e-3,
+                rise < 1.5 * band && rise_start_only > 10.0 * rise && rise < 1.5e-3,
                 "radii {radii:?}: band {band} V, rise start alone {rise_start_only} V, rise {rise} V"
             );
         }

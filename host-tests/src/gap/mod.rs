@@ -34,8 +34,9 @@
 //! records' first rise needs it); where hysteresis and drift alone leave the band and span
 //! splits within
 //! [`CANNOT_TELL_RATIO`] of each other and the diagnosis names hysteresis without ending at
-//! the floor, they run under the other split too and the diagnosis naming fewer effects is
-//! kept.
+//! the floor, they run under the other split too and the diagnosis that explains every
+//! record (within 2x its floor) is kept where only one does, else the one naming fewer
+//! effects.
 //!
 //! # What it trades
 //! The slow effects are fitted by a linear solve on settled samples, the fast ones by a

@@ -145,7 +145,8 @@ pub struct Diagnosis {
 pub struct CentreChoice {
     /// The split of the diagnosis kept: the one whose hysteresis and drift left less (the
     /// rise split only where it left less than [`RISE_CHOICE_RATIO`] of the band split's),
-    /// unless [`Self::by_diagnosis`] says the other split's diagnosis named fewer effects.
+    /// unless [`Self::by_diagnosis`] says the other split's diagnosis was kept instead (it
+    /// alone explained every record, or it named fewer effects).
     pub chosen: CentreLine,
     /// With the `Band` split: the sum over records of the mean squared residual, in noise
     /// variances (`null` in JSON when the fit failed).
@@ -1886,9 +1887,9 @@ fn diagnose_split(
 }
 
 /// The diagnosis kept of both splits', when the loop alone could not choose between them: the
-/// one that explains every record to its floor where only one does, else the one that names
-/// fewer effects, and of two that name as many, the one that ends lower. The
-/// split is a choice the records did not make, so the residuals the two leave (at several
+/// one that explains every record (within 2x its floor: no `unexplained` part) where only one
+/// does, else the one that names fewer effects, and of two that name as many, the one that
+/// ends lower. The split is a choice the records did not make, so the residuals the two leave (at several
 /// times the floor, a loop of another form's misfit, not noise) are not evidence for the extra
 /// names one of them gives: a Bouc-Wen loop under the `Band` split left a misfit that an
 /// `offset` of 279 mV and a `sensor-gain` of 0.82 took, beside the true `nonlinear-gain` the
@@ -2070,13 +2071,15 @@ fn choose_centre_line(
     }
 }
 
-/// Do the simulated outputs `sims` leave tails of [`DRIFT_TAIL_KEEP_NOISE`] noise floors or
-/// more during the records' holds: the creep's own signature, which no static effect makes
-/// during a hold (the final check keeps a drift whose removal brings them back, and no swap
-/// takes its place)?
+/// Do the simulated outputs `sims` (a model without its drift) leave tails of
+/// [`DRIFT_TAIL_KEEP_NOISE`] noise floors or more during the records' holds: the creep's own
+/// signature, which no static effect makes during a hold (the final check keeps such a drift,
+/// and no swap takes its place)? It reads the level the model without the drift leaves, not
+/// its change from the model with it: a drift named beside tails it does not reduce would stay
+/// too (none in the suites: a drift is named only where it explains the records).
 fn tails_back(data: &[Data], sims: &[Vec<f64>], noise: &[f64]) -> bool {
     let sg = signatures::compute(data, sims, noise);
-    sg.tail_v >= DRIFT_TAIL_KEEP_NOISE * sg.noise_v
+    sg.holds > 0 && sg.tail_v >= DRIFT_TAIL_KEEP_NOISE * sg.noise_v
 }
 
 /// `m` with its slow effects, and those of `extra` it lacks, fitted afresh together to the

@@ -1232,7 +1232,7 @@ fn fit_slow_linear(
         // The refinement searches with the hysteresis radii the grid's best solve uses (all
         // the columns of each, its bands and its outside columns, so the band penalty stays
         // whole: `everett::radius_group`) and every other fixed column; the final solve has
-        // them all (the basis' 22 radii x 4 bands would otherwise enter each of the
+        // them all (the basis' 22 radii x 11 bands would otherwise enter each of the
         // refinement's few hundred solves).
         let radius_of = |c: usize| everett::radius_group(c - COL_HYST);
         let is_hyst = |c: usize| (COL_HYST..COL_HYST + HYST_COLS).contains(&c);
