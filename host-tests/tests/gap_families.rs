@@ -1017,3 +1017,53 @@ fn a_creep_alone_on_few_long_holds_takes_no_loop() {
     println!("{}", lines.join("\n"));
     assert!(failed.is_empty(), "{failed:#?}");
 }
+
+/// A creep on records without holds is named as drift: the families' log and power creeps
+/// alone on one long sine or one chirp (seeds 6101-6106, drawn after session 31's rule was
+/// shaped on seed 6008, a creep and a PI loop on a sine). Such a creep counts from the record's
+/// first input, the model's drift starts settled there: the drift is admissible only beside an
+/// offset that takes its settled creep back (`select::creep_start`, step 12 of GAP.md), and its
+/// slowest lag (longer than a third of the record) leaves that constant loose. Measured in
+/// session 31: `drift` alone on all six, 1.01-1.70x the floor (before: on three, 6102, 6104
+/// and 6106, at 6.61, 17.1 and 1.70x; nothing on 6101, 6103 and 6105, at 6.8-16.3x; 6107 and
+/// 6108 of the same draw, left out for time, 1.78 and 1.36x, were a false `hysteresis` at
+/// 11.7x and `drift` at 1.36x). Asserted: `drift` named on every case and nothing else, each
+/// ending within 2x its floor.
+#[test]
+fn a_creep_without_holds_is_named_as_drift() {
+    if cfg!(debug_assertions) {
+        return;
+    }
+    let base = ModelFile::built_in("thesis-linear").unwrap();
+    let mut lines = Vec::new();
+    let mut failed = Vec::new();
+    for seed in 6101..=6106u64 {
+        let mut rng = StdRng::seed_from_u64(seed);
+        let family = if seed % 2 == 0 {
+            Family::LongSine
+        } else {
+            Family::Sweep
+        };
+        let protocol = draw_protocol(family, &mut rng);
+        // (the loop the creep-and-loop probe of the same seeds draws, not used here, keeps
+        // the creep's draw the same)
+        let _ = Hysteresis::draw(&mut rng);
+        let case = Case {
+            creep: Some(Creep::draw(&mut rng)),
+            ..Case::of(seed, protocol, vec!["drift"])
+        };
+        let d = diagnose(&base, &case.records(), &Options::default()).expect("diagnosis");
+        let ratio = d.final_rms_v / d.noise_floor_v;
+        let line = format!(
+            "seed {seed} ({}): named {:?}, {ratio:.2}x",
+            case.describe(),
+            d.named
+        );
+        if d.named != ["drift"] || ratio > 2.0 {
+            failed.push(line.clone());
+        }
+        lines.push(line);
+    }
+    println!("{}", lines.join("\n"));
+    assert!(failed.is_empty(), "{failed:#?}");
+}

@@ -241,6 +241,12 @@ pub const REST_ZERO_SIGMAS: f64 = 3.0;
 /// beside such a creep goes unnamed, and is reported as the pair).
 pub const CREEP_START_SHARE: f64 = 0.1;
 
+/// The share of a record's length above which a drift lag's time constant leaves its start
+/// unpinned for step 12 (our assumption: a lag moves 1 - e^-3 = 95 % of a step within three
+/// time constants, so one that has fewer within the record shows its start only as a
+/// constant and a slow trend, which an offset and the other lags share).
+pub const CREEP_START_UNPINNED_SHARE: f64 = 1.0 / 3.0;
+
 /// The least settled creep at the records' first input, in noise floors, for step 12 to
 /// compare an offset with it (our assumption: a record that starts at or near 0 V has no
 /// settled creep to take back, and there an offset is the sensor's; at 5 floors the step's

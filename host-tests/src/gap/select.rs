@@ -12,10 +12,10 @@
 use super::catalogue::{self, EFFECTS, FAST, SLOW};
 use super::constants::{
     CANDIDATE_ROUNDS, CANNOT_TELL_RATIO, CLIP_MIN_SAMPLES, CLIP_MIN_SHARE, CREEP_START_MIN_FLOORS,
-    CREEP_START_SHARE, DRIFT_TAIL_KEEP_NOISE, DRIFT_TAIL_MIN_NOISE, FOLLOW_MIN_CORRELATION,
-    HELD_LOOP_OVER_TAIL, HOLD_MIN_S, HYST_LOOP_MIN_NOISE, MAX_STEPS, MIN_EXPLAINED,
-    OCCAM_SWAP_RATIO, PAIR_FLOOR_RATIO, PRUNE_KEEP_EXCESS_VAR, PRUNE_PER_PARAM, PRUNE_RATIO,
-    REST_ZERO_INPUT_V, REST_ZERO_SHOWN_MIN, REST_ZERO_SIGMAS, REVERSED_CORRELATION,
+    CREEP_START_SHARE, CREEP_START_UNPINNED_SHARE, DRIFT_TAIL_KEEP_NOISE, DRIFT_TAIL_MIN_NOISE,
+    FOLLOW_MIN_CORRELATION, HELD_LOOP_OVER_TAIL, HOLD_MIN_S, HYST_LOOP_MIN_NOISE, MAX_STEPS,
+    MIN_EXPLAINED, OCCAM_SWAP_RATIO, PAIR_FLOOR_RATIO, PRUNE_KEEP_EXCESS_VAR, PRUNE_PER_PARAM,
+    PRUNE_RATIO, REST_ZERO_INPUT_V, REST_ZERO_SHOWN_MIN, REST_ZERO_SIGMAS, REVERSED_CORRELATION,
     REVERSED_MIN_FLOORS, RISE_CHOICE_RATIO, SCALE_APART_MAX, STATIC_TELL_RATIO, STOP_FLOOR_RATIO,
     STRUCTURE_ROUNDS,
 };
@@ -355,6 +355,8 @@ struct CreepStart {
     offset_v: f64,
     first_input_v: f64,
     creep_v: f64,
+    /// The settled creep there of the lags the record pins (`creep_v` where it pins all).
+    pinned_v: f64,
 }
 
 /// Step 12 (GAP.md): with `drift` and `offset` named, is the offset the model's settled creep
@@ -365,6 +367,14 @@ struct CreepStart {
 /// logarithmic one, measured from the record's start) reads exactly that much less at every
 /// sample, which an offset takes up. Records that start at different inputs have different
 /// settled creeps, and one offset cannot take back all of them.
+///
+/// A lag slower than a third of a record ([`CREEP_START_UNPINNED_SHARE`]) barely moves
+/// within it: whether it started settled or counting from the first input, the record sees
+/// a constant and a slow trend that the offset and the other lags share, so its part of the
+/// settled creep may or may not be in the offset. The offset is then compared with the span
+/// from the settled creep of the lags the record pins to that of all of them (a power-law
+/// creep on a 12 s sine, lags of 0.04, 1.2 and 9 s: the offset took back 0.87 V of a
+/// settled creep of 1.08 V, 0.91 V of it the two faster lags').
 fn creep_start(
     model: &ModelFile,
     named: &[String],
@@ -380,18 +390,35 @@ fn creep_start(
     let offset_v = model.offset.as_ref()?.offset_v;
     let mut first_creep_v = None;
     for (d, floor) in data.iter().zip(noise) {
-        let creep_v = model.settled_creep_reading_v(*d.u_v.first()?).ok()?;
-        let taken_back = (offset_v + creep_v).abs() <= CREEP_START_SHARE * creep_v.abs()
+        let u0 = *d.u_v.first()?;
+        let creep_v = model.settled_creep_reading_v(u0).ok()?;
+        // The settled creep of the lags the record pins (their time constants within
+        // CREEP_START_UNPINNED_SHARE of its length).
+        let seconds = d.t_s.last()? - d.t_s.first()?;
+        let mut pinned = model.clone();
+        if let Some(dr) = pinned.drift.as_mut() {
+            for (g, tau) in dr.gains.iter_mut().zip(dr.taus_s) {
+                if tau > CREEP_START_UNPINNED_SHARE * seconds {
+                    *g = 0.0;
+                }
+            }
+        }
+        let pinned_v = pinned.settled_creep_reading_v(u0).ok()?;
+        let (lo, hi) = (pinned_v.min(creep_v), pinned_v.max(creep_v));
+        let taken_back = -offset_v >= lo - CREEP_START_SHARE * lo.abs()
+            && -offset_v <= hi + CREEP_START_SHARE * hi.abs()
             && creep_v.abs() >= CREEP_START_MIN_FLOORS * floor;
         if !taken_back {
             return None;
         }
-        first_creep_v.get_or_insert(creep_v);
+        first_creep_v.get_or_insert((creep_v, pinned_v));
     }
+    let (creep_v, pinned_v) = first_creep_v?;
     Some(CreepStart {
         offset_v,
         first_input_v: *data.first()?.u_v.first()?,
-        creep_v: first_creep_v?,
+        creep_v,
+        pinned_v,
     })
 }
 
@@ -1387,7 +1414,12 @@ fn diagnose_split(
             .into_iter()
             .flatten()
             .map(|(e, m, s, ms)| {
-                if e.len() == 1 && e[0] == "offset" {
+                // (an offset that is the drift's settled creep at the first input taken
+                // back cannot show as a level: the drift's start, step 12, takes it)
+                let creep_start_v = e.len() == 1
+                    && e[0] == "offset"
+                    && creep_start(&model, &named, data, &noise).is_some();
+                if e.len() == 1 && e[0] == "offset" && !creep_start_v {
                     let sigs = signatures::compute(data, &s, &noise);
                     if !sigs.shows_offset(&model) {
                         unshown = Some((
@@ -1791,11 +1823,21 @@ fn diagnose_split(
         drift.unsettled_v = Some(c.offset_v);
         model.offset = None;
         named.retain(|n| n != "offset");
+        // (the lags slower than a third of the record leave a span: say it)
+        let of = if (c.pinned_v - c.creep_v).abs() > 1e-9 {
+            format!(
+                ", {:.1} mV of it the lags faster than a third of the record's, whose start it \
+                 pins",
+                1e3 * c.pinned_v
+            )
+        } else {
+            String::new()
+        };
         let why = format!(
             "the offset fitted at {:.1} mV is the model's settled creep at the records' first \
-             input ({:.1} mV at {:.2} V) taken back, within {:.0} %: a stage whose creep counts \
-             from that input (not settled there, as the model's drift starts) reads so, as \
-             would a sensor offset of that size; kept as the drift's start ([drift] \
+             input ({:.1} mV at {:.2} V{of}) taken back, within {:.0} %: a stage whose creep \
+             counts from that input (not settled there, as the model's drift starts) reads so, \
+             as would a sensor offset of that size; kept as the drift's start ([drift] \
              unsettled_v); a rest at 0 V before the records, or records that start at other \
              inputs, tell them apart",
             1e3 * c.offset_v,
