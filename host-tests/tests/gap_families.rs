@@ -871,9 +871,11 @@ fn creep_counted_from_the_first_input_is_not_a_sensor_offset() {
 /// (a `nonlinear-gain` or `sensor-gain` beside a loop of another form: 4001, 4005, 4014,
 /// 4015), 12 exact; with the eleven bands alone the drift was missing on 4003, 4011, 4013 and
 /// 4015 (on 4011 and 4015 taken out after an offset the loop had traded for, with tails of 61
-/// and 76 mV back; on 4003 a curvature swapped in; 4013 had lacked it since session 28). The identification cases' Duhem loops that run backwards after
-/// reversals end at 42-101x (their misfit, as in the suite). Asserted at those counts: a
-/// guard, not the figure.
+/// and 76 mV back; on 4003 a curvature swapped in; 4013 had lacked it since session 28).
+/// Session 31 (step 12's span for lags slower than a third of a record): 4001 exact at 3.14x,
+/// 3 false names (4005, 4014, 4015), 13 exact. The identification cases' Duhem loops that run
+/// backwards after reversals end at 42-101x (their misfit, as in the suite). Asserted at those
+/// counts: a guard, not the figure.
 #[test]
 fn a_creep_and_a_loop_together_are_both_named() {
     if cfg!(debug_assertions) {
@@ -941,7 +943,7 @@ fn a_creep_and_a_loop_together_are_both_named() {
             seeds.len(),
             "drift named on {creeps} of 16\n{report}"
         );
-        assert!(false_names <= 4, "{false_names} false names\n{report}");
+        assert!(false_names <= 3, "{false_names} false names\n{report}");
     }
 }
 
