@@ -1027,10 +1027,10 @@ fn a_creep_alone_on_few_long_holds_takes_no_loop() {
 /// offset that takes its settled creep back (`select::creep_start`, step 12 of GAP.md), and its
 /// slowest lag (longer than a third of the record) leaves that constant loose. Measured in
 /// session 31: `drift` alone on all six, 1.01-1.70x the floor (before: on three, 6102, 6104
-/// and 6106, at 6.61, 17.1 and 1.70x; nothing on 6101, 6103 and 6105, at 6.8-16.3x; 6107 and
-/// 6108 of the same draw, left out for time, 1.78 and 1.36x, were a false `hysteresis` at
-/// 11.7x and `drift` at 1.36x). Asserted: `drift` named on every case and nothing else, each
-/// ending within 2x its floor.
+/// and 6106, at 6.61, 17.1 and 1.70x; nothing on 6101, 6103 and 6105, at 6.8-16.3x). 6107
+/// and 6108 of the same draw, left out for time: now `drift` at 1.78 and 1.36x, before a false
+/// `hysteresis` at 11.7x and `drift` at 1.36x. Asserted: `drift` named on every case and
+/// nothing else, each ending within 2x its floor.
 #[test]
 fn a_creep_without_holds_is_named_as_drift() {
     if cfg!(debug_assertions) {

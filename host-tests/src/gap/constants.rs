@@ -238,7 +238,9 @@ pub const REST_ZERO_SIGMAS: f64 = 3.0;
 /// named a false offset the two agreed within 0.0, 5.2 and 0.1 %; the settled creep is the
 /// fitted lags' gains summed, the longest of them extrapolated past a record of a few of its
 /// time constants, so a tenth is the bar; a true offset within a tenth of the creep's size
-/// beside such a creep goes unnamed, and is reported as the pair).
+/// beside such a creep goes unnamed, and is reported as the pair). Where a record leaves its
+/// slower lags' start loose ([`CREEP_START_UNPINNED_SHARE`]) the tenth widens each end of the
+/// span from the faster lags' settled creep to all lags'.
 pub const CREEP_START_SHARE: f64 = 0.1;
 
 /// The share of a record's length above which a drift lag's time constant leaves its start
@@ -251,7 +253,8 @@ pub const CREEP_START_UNPINNED_SHARE: f64 = 1.0 / 3.0;
 /// compare an offset with it (our assumption: a record that starts at or near 0 V has no
 /// settled creep to take back, and there an offset is the sensor's; at 5 floors the step's
 /// tenth of the creep is half a floor, so an offset read as the creep's is told from a
-/// smaller one to within the noise of a single sample).
+/// smaller one to within the noise of a single sample). The faster lags' creep that bounds a
+/// span (step 12's loose start) must reach it too, or the span is not used.
 pub const CREEP_START_MIN_FLOORS: f64 = 5.0;
 
 /// Longest stride, seconds, over which the noise floor looks for coloured noise to decorrelate

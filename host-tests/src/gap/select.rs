@@ -355,13 +355,14 @@ struct CreepStart {
     offset_v: f64,
     first_input_v: f64,
     creep_v: f64,
-    /// The settled creep there of the lags the record pins (`creep_v` where it pins all).
+    /// The settled creep there of the lags the first record pins (`creep_v` where it pins
+    /// all, or where theirs is within the noise).
     pinned_v: f64,
 }
 
 /// Step 12 (GAP.md): with `drift` and `offset` named, is the offset the model's settled creep
 /// at every record's first input with its sign turned, within [`CREEP_START_SHARE`] of it
-/// (and that creep at least [`CREEP_START_MIN_FLOORS`] noise floors)? The model's drift starts
+/// or of the span below (and that creep at least [`CREEP_START_MIN_FLOORS`] noise floors)? The model's drift starts
 /// settled at the first input (a stage at rest there for ever); a stage whose creep counts
 /// from the first input (its creep had not settled there, or a creep with no end, such as a
 /// logarithmic one, measured from the record's start) reads exactly that much less at every
@@ -374,7 +375,9 @@ struct CreepStart {
 /// settled creep may or may not be in the offset. The offset is then compared with the span
 /// from the settled creep of the lags the record pins to that of all of them (a power-law
 /// creep on a 12 s sine, lags of 0.04, 1.2 and 9 s: the offset took back 0.87 V of a
-/// settled creep of 1.08 V, 0.91 V of it the two faster lags').
+/// settled creep of 1.08 V, 0.91 V of it the two faster lags'). Spans of records that start
+/// at different inputs may overlap, so such records tell a sensor offset from the drift's
+/// start only where their lags are pinned.
 fn creep_start(
     model: &ModelFile,
     named: &[String],
@@ -403,7 +406,15 @@ fn creep_start(
                 }
             }
         }
+        // (where the pinned lags leave no creep of the same sign clear of the noise, as a
+        // record shorter than three of every lag's time constants, the span would reach zero
+        // and take any small offset of the right sign: the one value of all the lags, then)
         let pinned_v = pinned.settled_creep_reading_v(u0).ok()?;
+        let pinned_v = if pinned_v * creep_v.signum() >= CREEP_START_MIN_FLOORS * floor {
+            pinned_v
+        } else {
+            creep_v
+        };
         let (lo, hi) = (pinned_v.min(creep_v), pinned_v.max(creep_v));
         let taken_back = -offset_v >= lo - CREEP_START_SHARE * lo.abs()
             && -offset_v <= hi + CREEP_START_SHARE * hi.abs()
@@ -1414,14 +1425,16 @@ fn diagnose_split(
             .into_iter()
             .flatten()
             .map(|(e, m, s, ms)| {
-                // (an offset that is the drift's settled creep at the first input taken
-                // back cannot show as a level: the drift's start, step 12, takes it)
-                let creep_start_v = e.len() == 1
+                // An offset that is the drift's settled creep at the first input taken back
+                // (step 12 below reads it as the drift's start) cannot show as a level: it
+                // cancels the drift's own; it is not taken out as unshown, and its growth
+                // judges it.
+                let drift_start = e.len() == 1
                     && e[0] == "offset"
                     && creep_start(&model, &named, data, &noise).is_some();
-                if e.len() == 1 && e[0] == "offset" && !creep_start_v {
+                if e.len() == 1 && e[0] == "offset" {
                     let sigs = signatures::compute(data, &s, &noise);
-                    if !sigs.shows_offset(&model) {
+                    if !drift_start && !sigs.shows_offset(&model) {
                         unshown = Some((
                             model.offset.as_ref().map_or(0.0, |o| o.offset_v),
                             sigs.level_v,
@@ -1824,20 +1837,23 @@ fn diagnose_split(
         model.offset = None;
         named.retain(|n| n != "offset");
         // (the lags slower than a third of the record leave a span: say it)
-        let of = if (c.pinned_v - c.creep_v).abs() > 1e-9 {
-            format!(
-                ", {:.1} mV of it the lags faster than a third of the record's, whose start it \
-                 pins",
-                1e3 * c.pinned_v
+        let (of, within) = if (c.pinned_v - c.creep_v).abs() > 1e-9 {
+            (
+                format!(
+                    ", {:.1} mV of it the lags faster than a third of the record's, whose start \
+                     the record pins",
+                    1e3 * c.pinned_v
+                ),
+                "of the span between the two",
             )
         } else {
-            String::new()
+            (String::new(), "of it")
         };
         let why = format!(
             "the offset fitted at {:.1} mV is the model's settled creep at the records' first \
-             input ({:.1} mV at {:.2} V{of}) taken back, within {:.0} %: a stage whose creep \
-             counts from that input (not settled there, as the model's drift starts) reads so, \
-             as would a sensor offset of that size; kept as the drift's start ([drift] \
+             input ({:.1} mV at {:.2} V{of}) taken back, within {:.0} % {within}: a stage whose \
+             creep counts from that input (not settled there, as the model's drift starts) reads \
+             so, as would a sensor offset of that size; kept as the drift's start ([drift] \
              unsettled_v); a rest at 0 V before the records, or records that start at other \
              inputs, tell them apart",
             1e3 * c.offset_v,
@@ -2338,15 +2354,18 @@ mod tests {
     use crate::io::csv::Record;
 
     /// Step 12 reads an offset as the drift's start only where it is the settled creep at
-    /// every record's first input taken back (within a tenth), that creep is clearly above the
-    /// noise, and both effects are named.
+    /// every record's first input taken back (within a tenth; of the span from the pinned
+    /// lags' creep to all lags' on a record too short to pin the slower lags' start), that
+    /// creep is clearly above the noise, and both effects are named.
     #[test]
     fn an_offset_that_takes_back_the_settled_creep_is_the_drifts_start() {
         let mut model = ModelFile::built_in("thesis-full").unwrap();
-        let record = |u0: f64| {
-            let t: Vec<f64> = (0..200).map(|i| i as f64 * 1e-3).collect();
-            let u: Vec<f64> = (0..t.len())
-                .map(|i| if i < 100 { u0 } else { u0 + 1.0 })
+        // `seconds` at `rate` Hz from u0, a step of 1 V half way.
+        let record_at = |u0: f64, rate: f64, seconds: f64| {
+            let n = (seconds * rate).round() as usize;
+            let t: Vec<f64> = (0..n).map(|i| i as f64 / rate).collect();
+            let u: Vec<f64> = (0..n)
+                .map(|i| if i < n / 2 { u0 } else { u0 + 1.0 })
                 .collect();
             Data::from_record(
                 "levels.csv",
@@ -2354,6 +2373,10 @@ mod tests {
             )
             .unwrap()
         };
+        // Short records (0.2 s) for the simulations; the lags (0.06, 0.75, 12 s) are pinned
+        // by records of 36 s and more (CREEP_START_UNPINNED_SHARE), which `long` are.
+        let record = |u0: f64| record_at(u0, 1e3, 0.2);
+        let long = |u0: f64| record_at(u0, 1e3, 40.0);
         let creep_v = model.settled_creep_reading_v(6.0).unwrap();
         // The thesis' drift: about 0.16 of the static output, settled (its three lags).
         assert!(creep_v > 0.3, "{creep_v}");
@@ -2392,19 +2415,46 @@ mod tests {
                 offset_v: -share * creep_v,
             });
             assert_eq!(
-                at(&model, &named, &[record(6.0)]).is_some(),
+                at(&model, &named, &[long(6.0)]).is_some(),
                 taken,
                 "offset at {share} of the creep"
             );
         }
+        // On 0.2 s only the 0.06 s lag is pinned (its gain 0.05 of the three's 0.155):
+        // the offset may be anywhere from its creep to all lags', a tenth beyond either end.
+        let drift = model.drift.as_ref().unwrap();
+        let fast_share = drift.gains[0] / drift.gains.iter().sum::<f64>();
+        for (share, taken) in [
+            (0.85, true),
+            (0.5, true),
+            (0.95 * fast_share, true),
+            (0.8 * fast_share, false),
+            (1.2, false),
+        ] {
+            model.offset = Some(crate::io::model_file::OffsetSection {
+                offset_v: -share * creep_v,
+            });
+            assert_eq!(
+                at(&model, &named, &[record(6.0)]).is_some(),
+                taken,
+                "offset at {share} of the creep, on 0.2 s"
+            );
+        }
+        // On 0.15 s no lag is pinned: the one value of all the lags, as on a long record
+        // (the span would reach zero).
+        model.offset = Some(crate::io::model_file::OffsetSection {
+            offset_v: -0.5 * creep_v,
+        });
+        assert!(at(&model, &named, &[record_at(6.0, 1e4, 0.15)]).is_none());
         model.offset = Some(crate::io::model_file::OffsetSection { offset_v: -creep_v });
         // The other sign: a sensor offset, not a creep taken back.
         let mut other = model.clone();
         other.offset = Some(crate::io::model_file::OffsetSection { offset_v: creep_v });
+        assert!(at(&other, &named, &[long(6.0)]).is_none());
         assert!(at(&other, &named, &[record(6.0)]).is_none());
         // Records starting elsewhere have another settled creep: one offset cannot be both.
-        assert!(at(&model, &named, &[record(6.0), record(3.0)]).is_none());
-        assert!(at(&model, &named, &[record(6.0), record(6.0)]).is_some());
+        assert!(at(&model, &named, &[long(6.0), long(3.0)]).is_none());
+        assert!(at(&model, &named, &[long(6.0), long(6.0)]).is_some());
         // No drift named, or no offset named: nothing to read.
         assert!(at(&model, &named[..1], &[record(6.0)]).is_none());
         assert!(at(&model, &named[1..], &[record(6.0)]).is_none());
