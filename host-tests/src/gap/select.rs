@@ -2404,42 +2404,46 @@ mod tests {
         let at = |model: &ModelFile, named: &[String], data: &[Data]| {
             creep_start(model, named, data, &vec![1e-3; data.len()]).map(|c| c.offset_v)
         };
-        for (share, taken) in [
-            (1.0, true),
-            (0.92, true),
-            (1.08, true),
-            (0.85, false),
-            (1.2, false),
-        ] {
-            model.offset = Some(crate::io::model_file::OffsetSection {
-                offset_v: -share * creep_v,
-            });
-            assert_eq!(
-                at(&model, &named, &[long(6.0)]).is_some(),
-                taken,
-                "offset at {share} of the creep"
-            );
-        }
+        // Offsets at `share` of the creep, taken as its start or not, on `rec`.
+        let shares = |model: &mut ModelFile, rec: &Data, cases: &[(f64, bool)]| {
+            for &(share, taken) in cases {
+                model.offset = Some(crate::io::model_file::OffsetSection {
+                    offset_v: -share * creep_v,
+                });
+                assert_eq!(
+                    at(model, &named, std::slice::from_ref(rec)).is_some(),
+                    taken,
+                    "offset at {share} of the creep, on {} s",
+                    rec.t_s.last().unwrap()
+                );
+            }
+        };
+        shares(
+            &mut model,
+            &long(6.0),
+            &[
+                (1.0, true),
+                (0.92, true),
+                (1.08, true),
+                (0.85, false),
+                (1.2, false),
+            ],
+        );
         // On 0.2 s only the 0.06 s lag is pinned (its gain 0.05 of the three's 0.155):
         // the offset may be anywhere from its creep to all lags', a tenth beyond either end.
         let drift = model.drift.as_ref().unwrap();
         let fast_share = drift.gains[0] / drift.gains.iter().sum::<f64>();
-        for (share, taken) in [
-            (0.85, true),
-            (0.5, true),
-            (0.95 * fast_share, true),
-            (0.8 * fast_share, false),
-            (1.2, false),
-        ] {
-            model.offset = Some(crate::io::model_file::OffsetSection {
-                offset_v: -share * creep_v,
-            });
-            assert_eq!(
-                at(&model, &named, &[record(6.0)]).is_some(),
-                taken,
-                "offset at {share} of the creep, on 0.2 s"
-            );
-        }
+        shares(
+            &mut model,
+            &record(6.0),
+            &[
+                (0.85, true),
+                (0.5, true),
+                (0.95 * fast_share, true),
+                (0.8 * fast_share, false),
+                (1.2, false),
+            ],
+        );
         // On 0.15 s no lag is pinned: the one value of all the lags, as on a long record
         // (the span would reach zero).
         model.offset = Some(crate::io::model_file::OffsetSection {
