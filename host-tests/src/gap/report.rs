@@ -488,6 +488,11 @@ pub fn write(dir: &Path, base: &ModelFile, data: &[Data], d: &Diagnosis) -> anyh
     for (i, t) in d.tried.iter().enumerate() {
         let _ = write!(h, "<p>step {}: ", i + 1);
         for (e, s, x, ok) in t {
+            // (a fast effect not searched has no score: its entry says why)
+            if s.is_nan() {
+                let _ = write!(h, "{}; ", esc(e));
+                continue;
+            }
             let _ = write!(
                 h,
                 "{} (score {:.0}, explains {:.0} %{}); ",

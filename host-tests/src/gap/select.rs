@@ -964,15 +964,8 @@ fn diagnose_split(
                 EFFECTS.len()
             ));
         }
-        let mut cands = candidates(
-            &model,
-            data,
-            &slow_x,
-            &cur_mse,
-            u_range,
-            sigs.peak_hz,
-            &named,
-        )?;
+        let (mut cands, unsearched) =
+            candidates(&model, data, &slow_x, &cur_mse, u_range, &sigs, &named)?;
         // Holds that show tails and levels apart by the step's direction: a creep and a loop
         // together, the pair every piezo stage has. The loop alone is not admitted beside
         // tails (a creep that has not caught up leaves levels apart too), and the drift
@@ -1035,6 +1028,13 @@ fn diagnose_split(
             scored
                 .iter()
                 .map(|(c, s, e, ok)| (c.effect.clone(), *s, *e, *ok))
+                .chain(unsearched.iter().map(|e| {
+                    let why = match *e {
+                        "resonance" => "no line in the residual spectrum where a mode could sit",
+                        _ => "the input stays away from the amplifier's limits",
+                    };
+                    (format!("{e} (not searched: {why})"), f64::NAN, 0.0, false)
+                }))
                 .collect(),
         );
         // Without a hold in any record, a drift's only evidence is a slow residual under the
@@ -2191,16 +2191,19 @@ fn slow_cost(set: &[&str]) -> usize {
         + set.len()
 }
 
-/// Fit every candidate and simulate it on every record.
+/// Fit every candidate and simulate it on every record; the fast effects left out because
+/// no fit of them could pass the step's gate ([`signatures::Signatures::could_support`])
+/// come back apart, for the trace.
 fn candidates(
     model: &ModelFile,
     data: &[Data],
     slow_x: &SlowRegressors,
     cur_mse: &[f64],
     u_range: (f64, f64),
-    peak_hz: f64,
+    sigs: &signatures::Signatures,
     named: &[String],
-) -> anyhow::Result<Vec<Candidate>> {
+) -> anyhow::Result<(Vec<Candidate>, Vec<&'static str>)> {
+    let peak_hz = sigs.peak_hz;
     // Slow effects: one joint solve per candidate set.
     let present_slow = present_slow(model);
     // The model without slow effects on every record (the slow fits' base), simulated in the
@@ -2285,10 +2288,20 @@ fn candidates(
         // Simulated in full only if it helps on the fast records (10 % of their MSE at least).
         (cost < cur_fast_cost + n_fast * (0.9f64).ln()).then_some(m)
     };
+    // The fast effects searched: those named (refitted), and those whose fit could pass the
+    // step's signature gate on this residual (`Signatures::could_support`; a second mode
+    // without a line in the residual spectrum, a saturation of an input far from the
+    // amplifier's limits, could not: the search is left out and the step is the same).
+    let (searched, skipped): (Vec<&'static str>, Vec<&'static str>) = FAST
+        .iter()
+        .copied()
+        .partition(|e| catalogue::present(model, e) || sigs.could_support(e, model));
     // Every slow set's joint solve and every fast effect's search, each with its simulation of
     // every record, in one pool, so that no core waits at a barrier between a phase of fits and
-    // one of simulations: the slow fits' base first and a fast search beside it (the slow fits
-    // need the base), then the slow sets costliest first (those with the drift's search and
+    // one of simulations: the slow fits' base first and the costliest fast search beside it
+    // (the slow fits need the base; a second mode's search, a grid of a hundred simulations
+    // of the fast records, started last, kept one core busy alone at the step's end: a 10 s
+    // record at 50 kHz), then the slow sets costliest first (those with the drift's search and
     // the hysteresis basis, then the larger ones), then the other fast searches.
     enum Task<'a> {
         Base,
@@ -2297,10 +2310,20 @@ fn candidates(
     }
     let mut by_cost = distinct.clone();
     by_cost.sort_by_key(|set| std::cmp::Reverse(slow_cost(set)));
+    let first_fast = if searched.contains(&"resonance") {
+        Some("resonance")
+    } else {
+        searched.first().copied()
+    };
     let mut tasks: Vec<Task> = vec![Task::Base];
-    tasks.extend(FAST.iter().take(1).map(|e| Task::Fast(e)));
+    tasks.extend(first_fast.map(Task::Fast));
     tasks.extend(by_cost.into_iter().map(Task::Slow));
-    tasks.extend(FAST.iter().skip(1).map(|e| Task::Fast(e)));
+    tasks.extend(
+        searched
+            .iter()
+            .filter(|e| Some(**e) != first_fast)
+            .map(|e| Task::Fast(e)),
+    );
     let simulated = |m: ModelFile| -> anyhow::Result<Fitted> {
         let (sims, mse_v) = simulate_all(&m, data)?;
         Ok((m, sims, mse_v))
@@ -2345,7 +2368,7 @@ fn candidates(
             results.push(candidate(e, catalogue::present(model, e), x));
         }
     }
-    Ok(results)
+    Ok((results, skipped))
 }
 
 #[cfg(test)]
