@@ -735,7 +735,11 @@ mod tests {
                     assert!(s.line_ratio_near(f) <= bound, "{f} Hz: {bound}");
                 }
             }
-            assert_eq!(s.could_support("resonance", &model), searched, "line {line_v}: {bound}");
+            assert_eq!(
+                s.could_support("resonance", &model),
+                searched,
+                "line {line_v}: {bound}"
+            );
             assert_eq!(bound >= LINE_RATIO_MIN, searched, "{bound}");
             // A mode fitted on that line passes the gate.
             if searched {
