@@ -127,6 +127,9 @@ impl Diagnosis {
         let mut s = String::new();
         for (i, t) in self.tried.iter().enumerate() {
             s.push_str(&format!("  tried at step {}: {t:?}\n", i + 1));
+            if let Some(left) = self.not_searched.get(i).filter(|l| !l.is_empty()) {
+                s.push_str(&format!("  not searched at step {}: {left:?}\n", i + 1));
+            }
         }
         let mv = |v: &[f64]| v.iter().map(|x| x * 1e3).collect::<Vec<_>>();
         for st in &self.steps {
@@ -488,11 +491,6 @@ pub fn write(dir: &Path, base: &ModelFile, data: &[Data], d: &Diagnosis) -> anyh
     for (i, t) in d.tried.iter().enumerate() {
         let _ = write!(h, "<p>step {}: ", i + 1);
         for (e, s, x, ok) in t {
-            // (a fast effect not searched has no score: its entry says why)
-            if s.is_nan() {
-                let _ = write!(h, "{}; ", esc(e));
-                continue;
-            }
             let _ = write!(
                 h,
                 "{} (score {:.0}, explains {:.0} %{}); ",
@@ -501,6 +499,11 @@ pub fn write(dir: &Path, base: &ModelFile, data: &[Data], d: &Diagnosis) -> anyh
                 100.0 * x,
                 if *ok { "" } else { ", not admissible" }
             );
+        }
+        if let Some(left) = d.not_searched.get(i).filter(|l| !l.is_empty()) {
+            for (e, why) in left {
+                let _ = write!(h, "{} (not searched: {}); ", esc(e), esc(why));
+            }
         }
         h.push_str("</p>");
     }

@@ -24,7 +24,7 @@ use super::data::{
     without_glitches,
 };
 use super::everett::CentreLine;
-use super::fast_fit::fit_fast;
+use super::fast_fit::{fit_fast, slew_out_of_reach};
 use super::input_noise;
 use super::mains::{self, HumLine};
 use super::signatures::{self, shows_share};
@@ -126,6 +126,9 @@ pub struct Diagnosis {
     pub model: ModelFile,
     /// Candidates tried at each step: (effect, score, explained fraction, admissible).
     pub tried: Vec<Vec<(String, f64, f64, bool)>>,
+    /// The fast effects each step did not search, and why: no fit of them could pass the
+    /// step's gate or change a simulation ([`signatures::Signatures::search_left_out`]).
+    pub not_searched: Vec<Vec<(String, String)>>,
     /// Signature checks of the base model's residual.
     pub signatures: signatures::Signatures,
     /// Named effects the records cannot tell from another (no holds: a drift and a
@@ -942,6 +945,7 @@ fn diagnose_split(
     let mut steps: Vec<Step> = Vec::new();
     let mut named: Vec<String> = Vec::new();
     let mut tried: Vec<Vec<(String, f64, f64, bool)>> = Vec::new();
+    let mut not_searched: Vec<Vec<(String, String)>> = Vec::new();
     let mut ambiguous: Vec<CannotTell> = Vec::new();
     let any_hold = data.iter().any(Data::has_hold);
 
@@ -1028,13 +1032,12 @@ fn diagnose_split(
             scored
                 .iter()
                 .map(|(c, s, e, ok)| (c.effect.clone(), *s, *e, *ok))
-                .chain(unsearched.iter().map(|e| {
-                    let why = match *e {
-                        "resonance" => "no line in the residual spectrum where a mode could sit",
-                        _ => "the input stays away from the amplifier's limits",
-                    };
-                    (format!("{e} (not searched: {why})"), f64::NAN, 0.0, false)
-                }))
+                .collect(),
+        );
+        not_searched.push(
+            unsearched
+                .iter()
+                .map(|(e, why)| (e.to_string(), why.to_string()))
                 .collect(),
         );
         // Without a hold in any record, a drift's only evidence is a slow residual under the
@@ -1937,6 +1940,7 @@ fn diagnose_split(
         base_sims: base_sims.clone(),
         model,
         tried,
+        not_searched,
         signatures: base_sigs.clone(),
         unexplained,
         cannot_tell,
@@ -2191,9 +2195,12 @@ fn slow_cost(set: &[&str]) -> usize {
         + set.len()
 }
 
+/// A fast effect whose search a step left out, and why.
+type LeftOut = (&'static str, &'static str);
+
 /// Fit every candidate and simulate it on every record; the fast effects left out because
-/// no fit of them could pass the step's gate ([`signatures::Signatures::could_support`])
-/// come back apart, for the trace.
+/// no fit of them could pass the step's gate ([`signatures::Signatures::search_left_out`])
+/// or change a simulation ([`slew_out_of_reach`]) come back apart with why, for the trace.
 fn candidates(
     model: &ModelFile,
     data: &[Data],
@@ -2202,7 +2209,7 @@ fn candidates(
     u_range: (f64, f64),
     sigs: &signatures::Signatures,
     named: &[String],
-) -> anyhow::Result<(Vec<Candidate>, Vec<&'static str>)> {
+) -> anyhow::Result<(Vec<Candidate>, Vec<LeftOut>)> {
     let peak_hz = sigs.peak_hz;
     // Slow effects: one joint solve per candidate set.
     let present_slow = present_slow(model);
@@ -2288,19 +2295,35 @@ fn candidates(
         // Simulated in full only if it helps on the fast records (10 % of their MSE at least).
         (cost < cur_fast_cost + n_fast * (0.9f64).ln()).then_some(m)
     };
-    // The fast effects searched: those named (refitted), and those whose fit could pass the
-    // step's signature gate on this residual (`Signatures::could_support`; a second mode
-    // without a line in the residual spectrum, a saturation of an input far from the
-    // amplifier's limits, could not: the search is left out and the step is the same).
-    let (searched, skipped): (Vec<&'static str>, Vec<&'static str>) = FAST
-        .iter()
-        .copied()
-        .partition(|e| catalogue::present(model, e) || sigs.could_support(e, model));
+    // The fast effects searched: those the model has (refitted), and those whose fit could
+    // pass the step's signature gate on this residual (`Signatures::search_left_out`: a
+    // second mode without a line in the residual spectrum, a saturation of an input far from
+    // the amplifier's limits, could not: the search is left out and the step is the same).
+    // A slew limit that the records' input never reaches changes no simulation
+    // (`fast_fit::slew_out_of_reach`: one long sine's steps, not random levels' jumps): where
+    // no other fast effect is named for its search to refit, it could not gain either.
+    let lone_slew = !named.iter().any(|n| FAST.contains(&n.as_str()))
+        && slew_out_of_reach(model, data, &fast_idx);
+    let mut skipped: Vec<LeftOut> = Vec::new();
+    let mut searched: Vec<&'static str> = Vec::new();
+    for e in FAST {
+        let why = if catalogue::present(model, e) {
+            None
+        } else if e == "slew-rate-limit" && lone_slew {
+            Some("the input's steps never reach the lowest limit the search can set")
+        } else {
+            sigs.search_left_out(e)
+        };
+        match why {
+            Some(w) => skipped.push((e, w)),
+            None => searched.push(e),
+        }
+    }
     // Every slow set's joint solve and every fast effect's search, each with its simulation of
     // every record, in one pool, so that no core waits at a barrier between a phase of fits and
     // one of simulations: the slow fits' base first and the costliest fast search beside it
-    // (the slow fits need the base; a second mode's search, a grid of a hundred simulations
-    // of the fast records, started last, kept one core busy alone at the step's end: a 10 s
+    // (the slow fits need the base; a second mode's search, over a hundred simulations of the
+    // fast records, started near the end, kept one core busy alone at the step's end: a 10 s
     // record at 50 kHz), then the slow sets costliest first (those with the drift's search and
     // the hysteresis basis, then the larger ones), then the other fast searches.
     enum Task<'a> {
@@ -2321,8 +2344,9 @@ fn candidates(
     tasks.extend(
         searched
             .iter()
-            .filter(|e| Some(**e) != first_fast)
-            .map(|e| Task::Fast(e)),
+            .copied()
+            .filter(|&e| Some(e) != first_fast)
+            .map(Task::Fast),
     );
     let simulated = |m: ModelFile| -> anyhow::Result<Fitted> {
         let (sims, mse_v) = simulate_all(&m, data)?;
@@ -2567,6 +2591,7 @@ mod tests {
             base_sims: Vec::new(),
             model: ModelFile::built_in("thesis-linear").unwrap(),
             tried: Vec::new(),
+            not_searched: Vec::new(),
             signatures: signatures::Signatures::default(),
             unexplained: None,
             cannot_tell: Vec::new(),
