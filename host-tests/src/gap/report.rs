@@ -121,8 +121,8 @@ impl Diagnosis {
     }
 
     /// The workings behind the table, for debugging a diagnosis: every candidate tried at
-    /// each step (effect, score, explained fraction, admissible), then each step's residual
-    /// per record, mV.
+    /// each step (effect, score, explained fraction, admissible) and the fast effects whose
+    /// search it left out (with why), then each step's residual per record, mV.
     pub fn trace(&self) -> String {
         let mut s = String::new();
         for (i, t) in self.tried.iter().enumerate() {

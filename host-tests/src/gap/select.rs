@@ -24,7 +24,7 @@ use super::data::{
     without_glitches,
 };
 use super::everett::CentreLine;
-use super::fast_fit::{fit_fast, slew_out_of_reach};
+use super::fast_fit::fit_fast;
 use super::input_noise;
 use super::mains::{self, HumLine};
 use super::signatures::{self, shows_share};
@@ -127,7 +127,7 @@ pub struct Diagnosis {
     /// Candidates tried at each step: (effect, score, explained fraction, admissible).
     pub tried: Vec<Vec<(String, f64, f64, bool)>>,
     /// The fast effects each step did not search, and why: no fit of them could pass the
-    /// step's gate or change a simulation ([`signatures::Signatures::search_left_out`]).
+    /// step's gate on its residual ([`signatures::Signatures::search_left_out`]).
     pub not_searched: Vec<Vec<(String, String)>>,
     /// Signature checks of the base model's residual.
     pub signatures: signatures::Signatures,
@@ -2200,7 +2200,7 @@ type LeftOut = (&'static str, &'static str);
 
 /// Fit every candidate and simulate it on every record; the fast effects left out because
 /// no fit of them could pass the step's gate ([`signatures::Signatures::search_left_out`])
-/// or change a simulation ([`slew_out_of_reach`]) come back apart with why, for the trace.
+/// come back apart with why, for the trace.
 fn candidates(
     model: &ModelFile,
     data: &[Data],
@@ -2299,18 +2299,11 @@ fn candidates(
     // pass the step's signature gate on this residual (`Signatures::search_left_out`: a
     // second mode without a line in the residual spectrum, a saturation of an input far from
     // the amplifier's limits, could not: the search is left out and the step is the same).
-    // A slew limit that the records' input never reaches changes no simulation
-    // (`fast_fit::slew_out_of_reach`: one long sine's steps, not random levels' jumps): where
-    // no other fast effect is named for its search to refit, it could not gain either.
-    let lone_slew = !named.iter().any(|n| FAST.contains(&n.as_str()))
-        && slew_out_of_reach(model, data, &fast_idx);
     let mut skipped: Vec<LeftOut> = Vec::new();
     let mut searched: Vec<&'static str> = Vec::new();
     for e in FAST {
         let why = if catalogue::present(model, e) {
             None
-        } else if e == "slew-rate-limit" && lone_slew {
-            Some("the input's steps never reach the lowest limit the search can set")
         } else {
             sigs.search_left_out(e)
         };
