@@ -85,6 +85,14 @@ pub struct Signatures {
     pub welch: Vec<(f64, f64)>,
 }
 
+/// How near a fitted mode a line of the residual spectrum must sit, a share of the mode's
+/// frequency ([`Signatures::line_ratio_near`]; our assumption: a mode's fit within 15 %).
+pub const LINE_NEAR_SHARE: f64 = 0.15;
+
+/// The window beyond a band within which [`Signatures::line_ratio_max`] looks for lines: wider
+/// than [`LINE_NEAR_SHARE`], so that it holds every window of a mode in the band.
+pub const LINE_BOUND_SHARE: f64 = 0.2;
+
 /// Samples per Welch segment of the line test (our assumption: about 20 ms at 50 kHz, so a
 /// mode damped by 0.02 at 3 kHz, whose line is 120 Hz wide, spans a few 49 Hz bins).
 pub const WELCH_SEGMENT: usize = 1024;
@@ -414,23 +422,26 @@ impl Signatures {
     /// Height of the Welch-averaged residual spectrum near `f_hz` (within 15 %) over its
     /// median level above 500 Hz: is there a line where a fitted mode sits?
     pub fn line_ratio_near(&self, f_hz: f64) -> f64 {
-        let near = self
-            .welch
-            .iter()
-            .filter(|(f, _)| (f / f_hz - 1.0).abs() <= 0.15)
-            .map(|x| x.1)
-            .fold(0.0f64, f64::max);
-        near / median_above_500(&self.welch)
+        self.line_ratio_where(|f| (f / f_hz - 1.0).abs() <= LINE_NEAR_SHARE)
     }
 
     /// The largest [`Self::line_ratio_near`] that a mode anywhere from `lo_hz` to `hi_hz`
-    /// could find: the highest bin within 20 % of that band (a superset of every such mode's
-    /// 15 % window, a mode a hair outside the band by rounding included) over the median.
+    /// could find: the highest bin within [`LINE_BOUND_SHARE`] of that band (a superset of
+    /// every such mode's window, a mode a hair outside the band by rounding included) over
+    /// the median.
     pub fn line_ratio_max(&self, lo_hz: f64, hi_hz: f64) -> f64 {
+        self.line_ratio_where(|f| {
+            f >= (1.0 - LINE_BOUND_SHARE) * lo_hz && f <= (1.0 + LINE_BOUND_SHARE) * hi_hz
+        })
+    }
+
+    /// The highest bin of the Welch-averaged residual spectrum at the frequencies `keep`
+    /// admits over its median level above 500 Hz.
+    fn line_ratio_where(&self, keep: impl Fn(f64) -> bool) -> f64 {
         let near = self
             .welch
             .iter()
-            .filter(|(f, _)| *f >= 0.8 * lo_hz && *f <= 1.2 * hi_hz)
+            .filter(|(f, _)| keep(*f))
             .map(|x| x.1)
             .fold(0.0f64, f64::max);
         near / median_above_500(&self.welch)
@@ -767,7 +778,11 @@ mod tests {
             }
             // (the band's bins alone: below the gate's ratio for a line outside it)
             if outside {
-                assert!(s.line_ratio_max(spec.lo / 0.8, spec.hi / 1.2) < LINE_RATIO_MIN);
+                let band = (
+                    spec.lo / (1.0 - LINE_BOUND_SHARE),
+                    spec.hi / (1.0 + LINE_BOUND_SHARE),
+                );
+                assert!(s.line_ratio_max(band.0, band.1) < LINE_RATIO_MIN);
             }
         }
         let s = sigs_of(&u, 0.0, 4e3);
