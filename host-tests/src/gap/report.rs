@@ -153,31 +153,30 @@ impl Diagnosis {
 }
 
 /// Why the unexplained residual stays, in words: no catalogued effect is admissible, or, where
-/// a pair the records cannot tell apart has the final model on one side (its figure is the
-/// final residual) and on the other would leave clearly less (by [`CANNOT_TELL_RATIO`], RMS:
-/// an offset beside a table that the final check took out as a level the records do not
-/// show), none that the records tell from another, with the least such a pair would leave:
-/// the residual is not beyond the catalogue, the records leave the choice open. (A pair a step
-/// left unnamed has that step's model on both sides, not the final one: not counted.)
+/// the final check took an offset beside the table out as a level the records do not show
+/// (`CannotTell::taken_out_unshown`), the final model is still that check's (its residual is
+/// the pair's figure without the offset, to the bit) and the offset left clearly less (by
+/// [`CANNOT_TELL_RATIO`], RMS), what it left and why it is not named: the residual is not
+/// beyond the catalogue, the records do not show that constant as a level. Both figures are
+/// residual RMS, noise included (the unexplained part's own figure has the noise taken out).
 pub(super) fn unexplained_words(final_rms_v: f64, pairs: &[CannotTell]) -> String {
-    let least = pairs
-        .iter()
-        .filter(|c| {
-            !c.neither_named
-                && (c.rms_v - final_rms_v).abs() <= 1e-9 * final_rms_v
-                && c.alternative_rms_v * CANNOT_TELL_RATIO < final_rms_v
-        })
-        .min_by(|a, b| a.alternative_rms_v.total_cmp(&b.alternative_rms_v));
-    match least {
+    let taken_out = pairs.iter().find(|c| {
+        c.taken_out_unshown
+            && c.rms_v.to_bits() == final_rms_v.to_bits()
+            && c.alternative_rms_v * CANNOT_TELL_RATIO < final_rms_v
+    });
+    match taken_out {
         None => "no catalogued effect is admissible".into(),
         Some(c) => format!(
-            "no catalogued effect that the records tell from another is admissible: with {} \
-             beside the final model's effects (a pair they cannot tell: {} and {}), {:.2} mV \
-             would be left",
+            "no catalogued effect is admissible that the records show: an {} beside the final \
+             model's effects left {:.2} mV of residual (the final model {:.2} mV), but the \
+             final check took it out as a level the residual without it does not show (the \
+             {} / {} pair above)",
             c.alternative,
+            1e3 * c.alternative_rms_v,
+            1e3 * final_rms_v,
             c.named,
-            c.alternative,
-            1e3 * c.alternative_rms_v
+            c.alternative
         ),
     }
 }
@@ -561,40 +560,39 @@ fn residual_against_input(rec: &Data, sims: &[f64]) -> Vec<(f64, f64)> {
 mod tests {
     use super::*;
 
-    fn pair(named: &str, alternative: &str, rms_v: f64, alt_v: f64, neither: bool) -> CannotTell {
+    fn pair(rms_v: f64, alt_v: f64, taken_out: bool) -> CannotTell {
         CannotTell {
-            named: named.into(),
-            alternative: alternative.into(),
+            named: "hysteresis".into(),
+            alternative: "offset".into(),
             rms_v,
             alternative_rms_v: alt_v,
-            neither_named: neither,
+            neither_named: false,
+            taken_out_unshown: taken_out,
             why: String::new(),
         }
     }
 
-    /// The unexplained part says a pair the records cannot tell would leave less only where
-    /// the pair has the final model on one side and the other would leave less by more than
-    /// the ratio that makes two residuals alike (families case 1001: an offset beside the
-    /// table left 1.53 mV, the final model without it 52.57 mV), and names the least such;
-    /// otherwise (alike, a step's pair neither of which was named, a pair of an earlier
-    /// model) no effect is admissible.
+    /// The unexplained part says what an offset the final check took out left only where
+    /// that check's model is the final one (its residual to the bit), and the offset left
+    /// clearly less (families case 1001: 1.53 mV with it, 52.57 mV without); other pairs
+    /// with the final model on one side (a rest reading the offset did not take, a look-alike
+    /// of `cannot_tell`), a check's model that later steps changed, or an offset that left
+    /// about as much, keep the plain words.
     #[test]
-    fn the_unexplained_part_names_a_pair_that_would_leave_clearly_less() {
+    fn the_unexplained_part_says_what_an_offset_taken_out_left() {
         let plain = "no catalogued effect is admissible";
         let final_v = 52.57e-3;
         assert_eq!(unexplained_words(final_v, &[]), plain);
-        let alike = pair("hysteresis", "offset", final_v, final_v / 1.2, false);
-        let step = pair("nonlinear-gain", "sensor-gain", 1.50e-3, 1.48e-3, true);
-        let earlier = pair("hysteresis", "offset", 60e-3, 1e-3, false);
+        let other_kind = pair(final_v, 1.53e-3, false);
+        let changed_since = pair(60e-3, 1.53e-3, true);
+        let alike = pair(final_v, final_v / 1.2, true);
         assert_eq!(
-            unexplained_words(final_v, &[alike.clone(), step.clone(), earlier.clone()]),
+            unexplained_words(final_v, &[other_kind.clone(), changed_since, alike]),
             plain
         );
-        let offset = pair("hysteresis", "offset", final_v, 1.53e-3, false);
-        let worse = pair("drift", "offset", final_v, 9e-3, false);
-        let w = unexplained_words(final_v, &[alike, step, earlier, worse, offset]);
+        let w = unexplained_words(final_v, &[other_kind, pair(final_v, 1.53e-3, true)]);
         assert!(
-            w.contains("with offset beside the final model's effects (a pair they cannot tell: hysteresis and offset), 1.53 mV"),
+            w.contains("an offset beside the final model's effects left 1.53 mV of residual (the final model 52.57 mV)"),
             "{w}"
         );
     }

@@ -262,7 +262,9 @@ impl Diagnosis {
 /// one's; or two static shapes a step could add, each explaining nearly as much as the other
 /// ([`STATIC_TELL_RATIO`], pooled and in every record: `explain_alike`), of which neither is
 /// named at that step (`neither_named`; dropped from the list where a later step, or a pair
-/// with an offset at the same step, names one of them).
+/// with an offset at the same step, names one of them); or an offset beside a table that the
+/// final check took out as a level the records do not show (`taken_out_unshown`), whatever
+/// the two leave.
 #[derive(Clone, Debug, serde::Serialize)]
 pub struct CannotTell {
     /// The effect named (with `neither_named`: the one the step would have added).
@@ -275,6 +277,12 @@ pub struct CannotTell {
     pub alternative_rms_v: f64,
     /// Neither effect was named: the records leave the choice between them to chance.
     pub neither_named: bool,
+    /// The final check took `alternative` (an offset beside a table) out as a level the
+    /// records do not show: `alternative_rms_v` is what the model left with it, `rms_v` without
+    /// it, and the two need not be alike (the report's unexplained part says so where the
+    /// second is clearly larger). Not in the JSON (its keys stay).
+    #[serde(skip)]
+    pub taken_out_unshown: bool,
     /// Why, and what record would tell them apart.
     pub why: String,
 }
@@ -506,6 +514,7 @@ fn cannot_tell(
             let near = ms.iter().zip(cur_mse).all(|(a, b)| *a <= r2 * *b);
             near.then(|| CannotTell {
                 neither_named: false,
+                taken_out_unshown: false,
                 named: e.to_string(),
                 alternative: f.to_string(),
                 rms_v: rms_of(cur_mse),
@@ -1074,6 +1083,7 @@ fn diagnose_split(
                             named: r.clone(),
                             alternative: "drift".into(),
                             neither_named: false,
+                            taken_out_unshown: false,
                             rms_v: r_rms,
                             alternative_rms_v: d_rms,
                             why: format!(
@@ -1158,6 +1168,7 @@ fn diagnose_split(
                             named: e.clone(),
                             alternative: r.clone(),
                             neither_named: true,
+                            taken_out_unshown: false,
                             rms_v: e_rms,
                             alternative_rms_v: *r_rms,
                             why: format!(
@@ -1200,6 +1211,7 @@ fn diagnose_split(
                             named: e.clone(),
                             alternative: "drift".into(),
                             neither_named: true,
+                            taken_out_unshown: false,
                             rms_v: e_rms,
                             alternative_rms_v: rms_of(&d.0.mse),
                             why: format!(
@@ -1519,31 +1531,46 @@ fn diagnose_split(
                     named: "hysteresis".into(),
                     alternative: "offset".into(),
                     neither_named: false,
+                    taken_out_unshown: true,
                     rms_v: rms_of(&ms),
                     alternative_rms_v: rms_of(&cur_mse),
-                    why: format!(
-                        "an offset fitted at {:.1} mV beside the hysteresis table leaves {:.2} mV; \
-                         taken out, the table's refit takes {} ({:.2} mV, the residual {:.1} mV \
-                         off zero): the table's relays these records never switch, and its start \
-                         memory, hold a constant of their own; a hold at a known input before \
-                         the record, or records that reach both ends of the range, tell a sensor \
-                         offset from them",
-                        1e3 * fitted_v,
-                        1e3 * rms_of(&cur_mse),
-                        // (where the model without it leaves clearly more, the constant
-                        // worked through the table's refit as a shape, not as a level: the
-                        // refit takes up the level only; families case 1001, a scale beside a
-                        // Bouc-Wen loop: 1.53 mV with the offset, 52.57 mV without)
-                        if rms_of(&ms) > CANNOT_TELL_RATIO * rms_of(&cur_mse) {
-                            "up its level but not what it did through the table's refit (a \
-                             scale's or a curvature's work beside a loop of another form can \
-                             be that)"
-                        } else {
-                            "the constant up"
-                        },
-                        1e3 * rms_of(&ms),
-                        1e3 * level_v
-                    ),
+                    // (where the model without it leaves clearly more, the constant worked
+                    // through the table's refit as a shape, not as a level: the refit takes up
+                    // the level only; families case 1001, a scale beside a Bouc-Wen loop:
+                    // 1.53 mV with the offset, 52.57 mV without)
+                    why: if rms_of(&ms) > CANNOT_TELL_RATIO * rms_of(&cur_mse) {
+                        format!(
+                            "an offset fitted at {:.1} mV beside the hysteresis table leaves \
+                             {:.2} mV; taken out, the table's refit takes up its level (the \
+                             residual {:.1} mV off zero) but not the rest of its work: {:.2} mV. \
+                             The final check takes out an offset that the residual without it \
+                             does not show as a level: this one worked through the table's \
+                             refit, as a scale's or a curvature's work beside a loop of another \
+                             form can, and as a level the records cannot tell it from the \
+                             table's own constant (its relays these records never switch, and \
+                             its start memory); a hold at a known input before the record, or \
+                             records that reach both ends of the range, tell a sensor offset \
+                             from it",
+                            1e3 * fitted_v,
+                            1e3 * rms_of(&cur_mse),
+                            1e3 * level_v,
+                            1e3 * rms_of(&ms)
+                        )
+                    } else {
+                        format!(
+                            "an offset fitted at {:.1} mV beside the hysteresis table leaves \
+                             {:.2} mV; taken out, the table's refit takes the constant up \
+                             ({:.2} mV, the residual {:.1} mV off zero): the table's relays \
+                             these records never switch, and its start memory, hold a constant \
+                             of their own; a hold at a known input before the record, or \
+                             records that reach both ends of the range, tell a sensor offset \
+                             from them",
+                            1e3 * fitted_v,
+                            1e3 * rms_of(&cur_mse),
+                            1e3 * rms_of(&ms),
+                            1e3 * level_v
+                        )
+                    },
                 });
             }
             steps.push(Step {
@@ -1809,6 +1836,7 @@ fn diagnose_split(
                 named: "hysteresis".into(),
                 alternative: "offset".into(),
                 neither_named: false,
+                taken_out_unshown: false,
                 rms_v,
                 alternative_rms_v: with_rms_v,
                 why: format!(
@@ -1889,6 +1917,7 @@ fn diagnose_split(
             named: "drift".into(),
             alternative: "offset".into(),
             neither_named: false,
+            taken_out_unshown: false,
             rms_v: rms_of(&cur_mse),
             alternative_rms_v: rms_of(&cur_mse),
             why,
@@ -1921,6 +1950,7 @@ fn diagnose_split(
             named: "hysteresis".into(),
             alternative: "offset".into(),
             neither_named: false,
+            taken_out_unshown: false,
             rms_v: rms_of(&cur_mse),
             alternative_rms_v: rms_of(&mse_with),
             why: format!(
