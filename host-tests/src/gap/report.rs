@@ -155,15 +155,15 @@ impl Diagnosis {
 /// Why the unexplained residual stays, in words: no catalogued effect is admissible, or, where
 /// the final check took an offset beside the table out as a level the records do not show
 /// (`CannotTell::taken_out_unshown`), the final model is still that check's (its residual is
-/// the pair's figure without the offset, to the bit) and the offset left clearly less (by
-/// [`CANNOT_TELL_RATIO`], RMS), what it left and why it is not named: the residual is not
+/// the pair's figure without the offset, to the bit) and the offset left clearly less
+/// ([`CannotTell::alternative_clearly_less`]), what it left and why it is not named: the residual is not
 /// beyond the catalogue, the records do not show that constant as a level. Both figures are
 /// residual RMS, noise included (the unexplained part's own figure has the noise taken out).
 pub(super) fn unexplained_words(final_rms_v: f64, pairs: &[CannotTell]) -> String {
     let taken_out = pairs.iter().find(|c| {
         c.taken_out_unshown
             && c.rms_v.to_bits() == final_rms_v.to_bits()
-            && c.alternative_rms_v * CANNOT_TELL_RATIO < final_rms_v
+            && c.alternative_clearly_less()
     });
     match taken_out {
         None => "no catalogued effect is admissible".into(),

@@ -287,6 +287,15 @@ pub struct CannotTell {
     pub why: String,
 }
 
+impl CannotTell {
+    /// Does the alternative leave clearly less than the named side (by [`CANNOT_TELL_RATIO`],
+    /// RMS)? Then the two are not alike in residual, and what keeps the alternative out is
+    /// another reason (`taken_out_unshown`: a level the records do not show).
+    pub fn alternative_clearly_less(&self) -> bool {
+        self.alternative_rms_v * CANNOT_TELL_RATIO < self.rms_v
+    }
+}
+
 /// The BIC score of the named `set` over all records at residual powers `ms`: each record's
 /// Gaussian log-likelihood term plus the set's parameters times the log of all samples
 /// (lower is better; the swaps and the reading at rest compare sets by it).
@@ -1527,51 +1536,49 @@ fn diagnose_split(
                 && e == "offset"
                 && named.iter().any(|n| n == "hysteresis")
             {
-                ambiguous.push(CannotTell {
+                let mut pair = CannotTell {
                     named: "hysteresis".into(),
                     alternative: "offset".into(),
                     neither_named: false,
                     taken_out_unshown: true,
                     rms_v: rms_of(&ms),
                     alternative_rms_v: rms_of(&cur_mse),
-                    // (where the model without it leaves clearly more, the constant worked
-                    // through the table's refit as a shape, not as a level: the refit takes up
-                    // the level only; families case 1001, a scale beside a Bouc-Wen loop:
-                    // 1.53 mV with the offset, 52.57 mV without)
-                    why: if rms_of(&ms) > CANNOT_TELL_RATIO * rms_of(&cur_mse) {
-                        format!(
-                            "an offset fitted at {:.1} mV beside the hysteresis table leaves \
-                             {:.2} mV; taken out, the table's refit takes up its level (the \
-                             residual {:.1} mV off zero) but not the rest of its work: {:.2} mV. \
-                             The final check takes out an offset that the residual without it \
-                             does not show as a level: this one worked through the table's \
-                             refit, as a scale's or a curvature's work beside a loop of another \
-                             form can, and as a level the records cannot tell it from the \
-                             table's own constant (its relays these records never switch, and \
-                             its start memory); a hold at a known input before the record, or \
-                             records that reach both ends of the range, tell a sensor offset \
-                             from it",
-                            1e3 * fitted_v,
-                            1e3 * rms_of(&cur_mse),
-                            1e3 * level_v,
-                            1e3 * rms_of(&ms)
-                        )
-                    } else {
-                        format!(
-                            "an offset fitted at {:.1} mV beside the hysteresis table leaves \
-                             {:.2} mV; taken out, the table's refit takes the constant up \
-                             ({:.2} mV, the residual {:.1} mV off zero): the table's relays \
-                             these records never switch, and its start memory, hold a constant \
-                             of their own; a hold at a known input before the record, or \
-                             records that reach both ends of the range, tell a sensor offset \
-                             from them",
-                            1e3 * fitted_v,
-                            1e3 * rms_of(&cur_mse),
-                            1e3 * rms_of(&ms),
-                            1e3 * level_v
-                        )
-                    },
-                });
+                    why: String::new(),
+                };
+                // (where the model without it leaves clearly more, the constant worked through
+                // the table's refit as a shape, not as a level: the refit takes up the level
+                // only; families case 1001, a scale beside a Bouc-Wen loop: 1.53 mV with the
+                // offset, 52.57 mV without)
+                let refit = if pair.alternative_clearly_less() {
+                    format!(
+                        "takes up its level (the residual {:.1} mV off zero) but not the rest of \
+                         its work: {:.2} mV. The final check takes out an offset that the \
+                         residual without it does not show as a level: this one worked through \
+                         the table's refit, as a scale's or a curvature's work beside a loop of \
+                         another form can, and as a level the records cannot tell it from the \
+                         table's own constant (its relays these records never switch, and its \
+                         start memory)",
+                        1e3 * level_v,
+                        1e3 * pair.rms_v
+                    )
+                } else {
+                    format!(
+                        "takes the constant up ({:.2} mV, the residual {:.1} mV off zero): the \
+                         table's relays these records never switch, and its start memory, hold \
+                         a constant of their own",
+                        1e3 * pair.rms_v,
+                        1e3 * level_v
+                    )
+                };
+                pair.why = format!(
+                    "an offset fitted at {:.1} mV beside the hysteresis table leaves {:.2} mV; \
+                     taken out, the table's refit {refit}; a hold at a known input before the \
+                     record, or records that reach both ends of the range, tell a sensor offset \
+                     from the table's constant",
+                    1e3 * fitted_v,
+                    1e3 * pair.alternative_rms_v
+                );
+                ambiguous.push(pair);
             }
             steps.push(Step {
                 removed: true,

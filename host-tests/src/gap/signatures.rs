@@ -419,7 +419,7 @@ fn strongest_line_hz(spec: &[(f64, f64)]) -> f64 {
 }
 
 impl Signatures {
-    /// Height of the Welch-averaged residual spectrum near `f_hz` (within 15 %) over its
+    /// Height of the Welch-averaged residual spectrum near `f_hz` (within [`LINE_NEAR_SHARE`]) over its
     /// median level above 500 Hz: is there a line where a fitted mode sits?
     pub fn line_ratio_near(&self, f_hz: f64) -> f64 {
         self.line_ratio_where(|f| (f / f_hz - 1.0).abs() <= LINE_NEAR_SHARE)
