@@ -71,6 +71,11 @@ pub struct SlowRegressors {
     /// [`TargetProducts`]): a step's candidates, and the final check's and the swaps' trials
     /// that take out a slow effect, solve on the same regressors against the same `y0`.
     products: std::sync::Mutex<Vec<(u64, std::sync::Arc<TargetProducts>)>>,
+    /// The products the regressors these were shaped from kept when they were shaped, where
+    /// the two differ in the drift's lags alone (a structural round's K(u) under the same
+    /// K'(u)): a target found here needs only the lags' products computed again
+    /// ([`target_products`]).
+    lag_parent: Vec<(u64, std::sync::Arc<TargetProducts>)>,
 }
 
 /// The regressors' weighted products with the target `y - y0` (`b`) and with the sensor
@@ -239,6 +244,7 @@ pub(super) fn slow_regressors(
         table_gain,
         gram: std::sync::OnceLock::new(),
         products: Default::default(),
+        lag_parent: Vec::new(),
     };
     slow_regressors_shaped(data, &Shape::default(), &base)
 }
@@ -454,6 +460,11 @@ pub(super) fn solve_rows(
 /// The regressors for `shape`, at the rows of `base` and with its hysteresis basis.
 #[allow(clippy::needless_range_loop)] // several arrays indexed together
 fn slow_regressors_shaped(data: &[Data], shape: &Shape, base: &SlowRegressors) -> SlowRegressors {
+    // Under the base's K'(u) the scaled basis is the base's own: shared, not scaled again
+    // (the same values; a basis of two hundred columns, a third of this function's time).
+    let same_basis = shape.kprime == base.kprime
+        && base.cols.len() == data.len()
+        && base.cols.iter().all(|c| c.len() == N_INPUT_COLS);
     let mut cols = Vec::new();
     let mut drives = Vec::new();
     for (r, d) in data.iter().enumerate() {
@@ -482,7 +493,9 @@ fn slow_regressors_shaped(data: &[Data], shape: &Shape, base: &SlowRegressors) -
         for k in 0..N_TAU {
             c.push(at.iter().map(|l| l[k]).collect());
         }
-        if shape.kprime.is_none() {
+        if same_basis {
+            c.extend(base.cols[r][COL_HYST..COL_HYST + HYST_COLS].iter().cloned());
+        } else if shape.kprime.is_none() {
             c.extend(base.hyst[r].iter().cloned());
         } else {
             let kp: Vec<f64> = rows.iter().map(|&i| shape.kprime(uf[i])).collect();
@@ -526,6 +539,11 @@ fn slow_regressors_shaped(data: &[Data], shape: &Shape, base: &SlowRegressors) -
         table_gain: base.table_gain,
         gram: std::sync::OnceLock::new(),
         products: Default::default(),
+        lag_parent: if same_basis {
+            base.products.lock().map(|p| p.clone()).unwrap_or_default()
+        } else {
+            Vec::new()
+        },
     };
     // With the base's K'(u) only the lags changed.
     if shape.kprime == base.kprime
@@ -1435,15 +1453,29 @@ fn target_products(
     if let Some(t) = kept(key) {
         return t;
     }
+    // Regressors that differ from their parent's in the lags alone take the parent's products
+    // of the other columns (the same values, summed in the same order) and compute the lags'.
+    let parent = x
+        .lag_parent
+        .iter()
+        .find(|(q, _)| *q == key)
+        .map(|(_, t)| t.clone());
     let mut b = DVector::<f64>::zeros(N_COLS);
     let mut g_s = DVector::<f64>::zeros(N_COLS);
+    if let Some(p) = &parent {
+        for k in N_TAU..N_COLS {
+            b[k] = p.b[k];
+            g_s[k] = p.g_s[k];
+        }
+    }
     for (r, d) in data.iter().enumerate() {
         let cols = &x.cols[r];
         let rows = &x.rows[r];
         let w = 1.0 / rows.len().max(1) as f64;
         let e: Vec<f64> = rows.iter().map(|&i| d.y_v[i] - y0[r][i]).collect();
         let s: Vec<f64> = rows.iter().map(|&i| y0[r][i]).collect();
-        for (k, c) in cols.iter().enumerate() {
+        let taken = if parent.is_some() { N_TAU } else { cols.len() };
+        for (k, c) in cols.iter().enumerate().take(taken) {
             // Both products in one pass over the column (the pass is memory-bound).
             let (ce, cs) = c
                 .iter()
@@ -1452,10 +1484,12 @@ fn target_products(
             b[k] += w * ce;
             g_s[k] += w * cs;
         }
-        b[COL_OFFSET] += w * e.iter().sum::<f64>();
-        b[COL_SGAIN] += w * dot(&s, &e);
-        g_s[COL_OFFSET] += w * s.iter().sum::<f64>();
-        g_s[COL_SGAIN] += w * dot(&s, &s);
+        if parent.is_none() {
+            b[COL_OFFSET] += w * e.iter().sum::<f64>();
+            b[COL_SGAIN] += w * dot(&s, &e);
+            g_s[COL_OFFSET] += w * s.iter().sum::<f64>();
+            g_s[COL_SGAIN] += w * dot(&s, &s);
+        }
     }
     let t = std::sync::Arc::new(TargetProducts { b, g_s });
     if let Ok(mut p) = x.products.lock() {
