@@ -473,8 +473,40 @@ pub fn start_candidates(u0_v: f64, range: (f64, f64)) -> Vec<Vec<f64>> {
             out.push(h);
         }
     }
+    // A scan that died away around another level, the stage then moved to the first input
+    // (the move wipes out what it passes: `HysteresisMemory::reset_after`).
+    for k in 1..START_AWAY_LEVELS {
+        let c = lo + span * k as f64 / START_AWAY_LEVELS as f64;
+        if (c - u0).abs() < 0.5 * span / START_AWAY_LEVELS as f64 {
+            continue;
+        }
+        for a in START_AWAY_AMPLITUDES {
+            for sign in [1.0, -1.0] {
+                let mut amp = a * span;
+                let mut s = sign;
+                let mut h = Vec::new();
+                while amp > 0.01 * span && h.len() + 2 < crate::io::model_file::MAX_START_TURNS {
+                    h.push((c + s * amp).clamp(lo, hi));
+                    amp *= START_AWAY_RATIO;
+                    s = -s;
+                }
+                out.push(h);
+            }
+        }
+    }
     out
 }
+
+/// Levels of the table's span (its `k / START_AWAY_LEVELS`, `k >= 1`) around which a start
+/// candidate's scan died away before the stage was moved to the record's first input; those
+/// within half a level of the first input are the centred ones above. Our assumption: a lab
+/// parks its stage after scanning around a working point anywhere in the span; eighths are
+/// 1.25 V apart on a 10 V table, a fraction of the loop's width.
+pub const START_AWAY_LEVELS: usize = 8;
+/// First amplitudes (shares of the span) of those scans.
+pub const START_AWAY_AMPLITUDES: [f64; 2] = [0.25, 0.5];
+/// Each turn's amplitude as a share of the last in those scans.
+pub const START_AWAY_RATIO: f64 = 0.85;
 
 /// The grid line of the once-switching relays ([`rise_col`]) and the lowest turning point of
 /// the [`CentreLine::Rise`] split's start memory ([`start_memory`]): one interval above the

@@ -330,7 +330,7 @@ impl HystForm {
 
 /// The Everett function of a Preisach density, tabulated: `E(a, b)` = the density's mass over
 /// the relays `b <= beta <= alpha <= a`.
-#[derive(Debug)]
+#[derive(Clone, Debug)]
 pub struct Everett {
     lo: f64,
     step: f64,
@@ -558,7 +558,7 @@ impl<'a> HystOp<'a> {
 }
 
 /// A hysteresis truth: form, scale and the excursions before each record.
-#[derive(Debug)]
+#[derive(Clone, Debug)]
 pub struct Hysteresis {
     pub form: HystForm,
     /// Loop width on a 0-10-0 V cycle as a share of the 10 V span.
