@@ -458,23 +458,27 @@ pub fn start_candidates(u0_v: f64, range: (f64, f64)) -> Vec<Vec<f64>> {
             out.push(vec![hi, v]);
         }
     }
+    // A scan that died away around `c`: turns `c + a`, `c - r a`, ... (first up for `sign`
+    // 1), held to the range, down to 1 % of the span (two turns fewer than a model file
+    // holds: the rise split's memory puts its descent first, `start_memory`).
+    let scan = |c: f64, a: f64, ratio: f64, sign: f64| -> Vec<f64> {
+        let mut amp = a * span;
+        let mut s = sign;
+        let mut h = Vec::new();
+        while amp > 0.01 * span && h.len() + 2 < crate::io::model_file::MAX_START_TURNS {
+            h.push((c + s * amp).clamp(lo, hi));
+            amp *= ratio;
+            s = -s;
+        }
+        h
+    };
     for (a, ratio) in START_DECAYS {
         for sign in [1.0, -1.0] {
-            let mut amp = a * span;
-            let mut s = sign;
-            let mut h = Vec::new();
-            // (two turns fewer than a model file holds: the rise split's memory puts its
-            // descent first, `start_memory`)
-            while amp > 0.01 * span && h.len() + 2 < crate::io::model_file::MAX_START_TURNS {
-                h.push((u0 + s * amp).clamp(lo, hi));
-                amp *= ratio;
-                s = -s;
-            }
-            out.push(h);
+            out.push(scan(u0, a, ratio, sign));
         }
     }
-    // A scan that died away around another level, the stage then moved to the first input
-    // (the move wipes out what it passes: `HysteresisMemory::reset_after`).
+    // Such a scan around another level, the stage then moved to the first input (the move
+    // wipes out what it passes: `HysteresisMemory::reset_after`).
     for k in 1..START_AWAY_LEVELS {
         let c = lo + span * k as f64 / START_AWAY_LEVELS as f64;
         if (c - u0).abs() < 0.5 * span / START_AWAY_LEVELS as f64 {
@@ -482,15 +486,7 @@ pub fn start_candidates(u0_v: f64, range: (f64, f64)) -> Vec<Vec<f64>> {
         }
         for a in START_AWAY_AMPLITUDES {
             for sign in [1.0, -1.0] {
-                let mut amp = a * span;
-                let mut s = sign;
-                let mut h = Vec::new();
-                while amp > 0.01 * span && h.len() + 2 < crate::io::model_file::MAX_START_TURNS {
-                    h.push((c + s * amp).clamp(lo, hi));
-                    amp *= START_AWAY_RATIO;
-                    s = -s;
-                }
-                out.push(h);
+                out.push(scan(c, a, START_AWAY_RATIO, sign));
             }
         }
     }
