@@ -438,9 +438,12 @@ pub const START_DECAYS: [(f64, f64); 6] = [
 /// top to `v` and up again (`[hi, v]`, three depths); and a decaying oscillation around
 /// `u0` (`u0 +- A, u0 -+ r A, ...` down to 1 % of the span, three amplitudes, ratios `r` 0.6
 /// and 0.85 ([`START_DECAYS`]), first excursion up or down: the state a stage is left in
-/// after a scan that died away, close to the Preisach plane's anti-diagonal). Our
-/// assumption: a lab record starts from rest after one of these; 21 candidates, each checked
-/// in one simulation of the fitted model.
+/// after a scan that died away, close to the Preisach plane's anti-diagonal); and such a scan
+/// around another eighth of the span, the stage then moved to `u0` ([`START_AWAY_LEVELS`]:
+/// parked after work elsewhere). Our assumption: a lab record starts from rest after one of
+/// these; up to 49 candidates, each checked on the fitted model over the head of each record
+/// its memory changes ([`super::start::search`], which counts those that leave the table in
+/// the same state at the first input once).
 pub fn start_candidates(u0_v: f64, range: (f64, f64)) -> Vec<Vec<f64>> {
     let (lo, hi) = range;
     let u0 = u0_v.clamp(lo, hi);

@@ -463,6 +463,7 @@ fn slow_regressors_shaped(data: &[Data], shape: &Shape, base: &SlowRegressors) -
     // Under the base's K'(u) the scaled basis is the base's own: shared, not scaled again
     // (the same values; a basis of two hundred columns, a third of this function's time).
     let same_basis = shape.kprime == base.kprime
+        && (shape.kprime.is_none() || shape.range == base.kprime_range)
         && base.cols.len() == data.len()
         && base.cols.iter().all(|c| c.len() == N_INPUT_COLS);
     let mut cols = Vec::new();
