@@ -308,11 +308,12 @@ pub fn search(
         let no_worse = ms.iter().zip(&ms_now).all(|(a, b)| *a <= *b * 1.000_001);
         // Scored as the selection scores an effect (BIC over all records): a start that buys
         // less than its parameters' worth is the table's refit chasing what another effect
-        // left. Charged in full also where it replaces an earlier start (the second round):
-        // a swap that gains less than a start's worth is the same chase (our assumption, on
-        // the conservative side: a start is kept only where the records show it) (hidden-effect case 1084, a Bouc-Wen loop beside a curvature: a scan centred
+        // left (hidden-effect case 1084, a Bouc-Wen loop beside a curvature: a scan centred
         // mid-span, taken for a 1e-5 share of the residual power, bent the table so far that
         // the curvature was never named and the final residual stayed at 98x the floor).
+        // Charged in full also where it replaces an earlier start (the second round): a swap
+        // that gains less than a start's worth is the same chase (our assumption, on the
+        // conservative side: a start is kept only where the records show it).
         let n_all: f64 = data.iter().map(|d| d.len() as f64).sum();
         let score: f64 = data
             .iter()
