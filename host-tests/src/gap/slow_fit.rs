@@ -76,7 +76,66 @@ pub struct SlowRegressors {
     /// K'(u)): a target found here needs only the lags' products computed again
     /// ([`target_products`]).
     lag_parent: Vec<(u64, std::sync::Arc<TargetProducts>)>,
+    /// The slow fits already run on these regressors ([`fit_slow`] looks here first), the
+    /// oldest first.
+    fits: std::sync::Mutex<std::collections::VecDeque<KeptFit>>,
 }
+
+/// What a [`fit_slow`] on one [`SlowRegressors`] depends on besides them, the records and its
+/// rounds: the bits of the model without slow effects (`y0`, every sample of every record,
+/// hashed), the set and the inputs' span.
+#[derive(PartialEq)]
+struct FitKey {
+    y0: u64,
+    set: Vec<String>,
+    u_range_bits: (u64, u64),
+}
+
+/// A slow fit a [`SlowRegressors`] keeps: its key, how its rounds went ([`RoundsRun`]) and
+/// its result.
+struct KeptFit {
+    key: FitKey,
+    run: RoundsRun,
+    fit: Option<SlowParams>,
+}
+
+/// How a [`fit_slow`]'s rounds went, enough to tell whether a call with other `rounds` would
+/// run the same ones ([`rounds_to_run`]): the state after the same rounds is the same fit.
+#[derive(Clone, Debug, Default)]
+struct RoundsRun {
+    /// Per round reached: had K'(u) settled (`COUPLE_SETTLED`) at its start?
+    settled: Vec<bool>,
+    /// The round whose solve failed (the loop stops there with the fit before it).
+    failed_at: Option<usize>,
+    /// The rounds run in full: the result is the fit after them (`None`: the same for any
+    /// `rounds`, the linear fit alone or its failure).
+    ran: Option<usize>,
+}
+
+/// The rounds [`fit_slow`] runs in full with `rounds` asked for, given how they went
+/// (`run.settled`, `run.failed_at`); `None` where `run` does not reach far enough to say. A
+/// coupled set (K'(u) beside a drift's K) runs `max(rounds, COUPLE_ROUNDS_MAX)` at most and
+/// stops at the first round from `rounds` on that starts settled; the others run `rounds`
+/// (one without the drift's K).
+fn rounds_to_run(couple: bool, has_drift: bool, rounds: usize, run: &RoundsRun) -> Option<usize> {
+    let (rounds, max_rounds) = round_limits(couple, has_drift, rounds);
+    for round in 0..max_rounds {
+        if couple && round >= rounds && *run.settled.get(round)? {
+            return Some(round);
+        }
+        if run.failed_at == Some(round) {
+            return Some(round);
+        }
+    }
+    Some(max_rounds)
+}
+
+/// Slow fits a [`SlowRegressors`] keeps (our assumption: a diagnosis fits the same set against
+/// the same `y0` again in the next step's refit of the present set, in the final check's
+/// trials that take out a fast effect or the effect a step added, and in the swaps; measured
+/// on the gap bench, the coupled sets of drift, hysteresis and curvature, a second each, are
+/// the repeats, and a step adds at most a few sets).
+const FITS_KEPT: usize = 16;
 
 /// The regressors' weighted products with the target `y - y0` (`b`) and with the sensor
 /// gain's column `y0` (`g_s`, that column's row of the Gram matrix; its entry with itself
@@ -245,6 +304,7 @@ pub(super) fn slow_regressors(
         gram: std::sync::OnceLock::new(),
         products: Default::default(),
         lag_parent: Vec::new(),
+        fits: Default::default(),
     };
     slow_regressors_shaped(data, &Shape::default(), &base)
 }
@@ -545,6 +605,7 @@ fn slow_regressors_shaped(data: &[Data], shape: &Shape, base: &SlowRegressors) -
         } else {
             Vec::new()
         },
+        fits: Default::default(),
     };
     // With the base's K'(u) only the lags changed.
     if shape.kprime == base.kprime
@@ -760,6 +821,11 @@ fn gram_new_lags(x: &SlowRegressors, g_base: &DMatrix<f64>) -> DMatrix<f64> {
 ///
 /// `u_range` is the range the model file gets for K'(u) and K(u) below its knee
 /// ([`catalogue::with_slow`]), so a K accepted here is one the stage accepts.
+///
+/// A fit these regressors ran before against the same `y0` (to the bit), set and span, whose
+/// rounds went as this call's would ([`rounds_to_run`]), is not run again: the diagnosis fits
+/// the same set more than once ([`FITS_KEPT`]), and the fit is a function of these alone (the
+/// records are the ones the regressors were made for), so the kept result is the fit itself.
 pub(super) fn fit_slow(
     data: &[Data],
     y0: &[Vec<f64>],
@@ -768,7 +834,66 @@ pub(super) fn fit_slow(
     u_range: (f64, f64),
     rounds: usize,
 ) -> Option<SlowParams> {
-    let mut p = fit_slow_linear(data, y0, x, set, None)?;
+    use std::hash::{Hash, Hasher};
+    let mut h = std::collections::hash_map::DefaultHasher::new();
+    for y in y0 {
+        y.len().hash(&mut h);
+        for v in y {
+            v.to_bits().hash(&mut h);
+        }
+    }
+    let key = FitKey {
+        y0: h.finish(),
+        set: set.iter().map(|e| e.to_string()).collect(),
+        u_range_bits: (u_range.0.to_bits(), u_range.1.to_bits()),
+    };
+    let (couple, has_drift) = coupling(data, set);
+    let same = |k: &KeptFit| {
+        k.key == key
+            && match k.run.ran {
+                None => true,
+                ran => rounds_to_run(couple, has_drift, rounds, &k.run) == ran,
+            }
+    };
+    if let Some(p) = x
+        .fits
+        .lock()
+        .ok()
+        .and_then(|f| f.iter().find(|k| same(k)).map(|k| k.fit.clone()))
+    {
+        return p;
+    }
+    let (fit, run) = fit_slow_once(data, y0, x, set, u_range, rounds);
+    if let Ok(mut f) = x.fits.lock()
+        && !f.iter().any(same)
+    {
+        if f.len() >= FITS_KEPT {
+            f.pop_front();
+        }
+        f.push_back(KeptFit {
+            key,
+            run,
+            fit: fit.clone(),
+        });
+    }
+    fit
+}
+
+/// The rounds [`fit_slow`] runs at least before K'(u) may stop it as settled, and at most,
+/// with `rounds` asked for.
+fn round_limits(couple: bool, has_drift: bool, rounds: usize) -> (usize, usize) {
+    let rounds = if has_drift { rounds } else { rounds.min(1) };
+    let max_rounds = if couple && has_drift {
+        rounds.max(COUPLE_ROUNDS_MAX)
+    } else {
+        rounds
+    };
+    (rounds, max_rounds)
+}
+
+/// Whether `set` couples K'(u) with the hysteresis table (`hysteresis` and `nonlinear-gain`
+/// both), and whether it fits the drift's K(u).
+fn coupling(data: &[Data], set: &[&str]) -> (bool, bool) {
     let couple = set.contains(&"hysteresis") && set.contains(&"nonlinear-gain");
     // The drift's K(u) shows as tails of different heights after steps to different levels;
     // without held levels its `K(u) u` through the slow lags is a static curvature the
@@ -776,8 +901,25 @@ pub(super) fn fit_slow(
     // with K = 1 and lost it to a knee'd K, session 15).
     let has_drift = set.contains(&"drift")
         && super::select::held_levels(data) >= super::select::HELD_LEVELS_MIN;
+    (couple, has_drift)
+}
+
+/// [`fit_slow`] itself, run, and how its rounds went.
+fn fit_slow_once(
+    data: &[Data],
+    y0: &[Vec<f64>],
+    x: &SlowRegressors,
+    set: &[&str],
+    u_range: (f64, f64),
+    rounds: usize,
+) -> (Option<SlowParams>, RoundsRun) {
+    let mut run = RoundsRun::default();
+    let Some(mut p) = fit_slow_linear(data, y0, x, set, None) else {
+        return (None, run);
+    };
+    let (couple, has_drift) = coupling(data, set);
     if !couple && !has_drift {
-        return Some(p);
+        return (Some(p), run);
     }
     let mut shape = Shape {
         range: u_range,
@@ -787,12 +929,7 @@ pub(super) fn fit_slow(
     // until K is known); K'(u) on the play sum alone settles in one (session 14). Beside the
     // drift's K it need not: the two trade, and K' after one round is a step of an
     // oscillation (`COUPLE_ROUNDS_MAX`), so the rounds go on until K' settles.
-    let rounds = if has_drift { rounds } else { rounds.min(1) };
-    let max_rounds = if couple && has_drift {
-        rounds.max(COUPLE_ROUNDS_MAX)
-    } else {
-        rounds
-    };
+    let (rounds, max_rounds) = round_limits(couple, has_drift, rounds);
     // (K' as the stage has it: `Shape::kprime`)
     let kprime_at = |g: Option<(f64, f64)>, u: f64| {
         Shape {
@@ -805,15 +942,16 @@ pub(super) fn fit_slow(
     for round in 0..max_rounds {
         if couple {
             // (settled: K' moved less than `COUPLE_SETTLED` at both ends of the span and its
-            // middle in the last round)
-            if round >= rounds
-                && [u_range.0, 0.5 * (u_range.0 + u_range.1), u_range.1]
-                    .iter()
-                    .all(|&u| {
-                        (kprime_at(p.gain, u) - kprime_at(shape.kprime, u)).abs() < COUPLE_SETTLED
-                    })
-            {
-                break;
+            // middle in the last round; kept for every round, for the memo's `rounds_to_run`)
+            let settled = [u_range.0, 0.5 * (u_range.0 + u_range.1), u_range.1]
+                .iter()
+                .all(|&u| {
+                    (kprime_at(p.gain, u) - kprime_at(shape.kprime, u)).abs() < COUPLE_SETTLED
+                });
+            run.settled.push(settled);
+            if round >= rounds && settled {
+                run.ran = Some(round);
+                return (Some(p), run);
             }
             shape.kprime = p.gain;
         }
@@ -846,10 +984,15 @@ pub(super) fn fit_slow(
                 q.drift_poly = shape.kdrift;
                 p = q;
             }
-            None => break,
+            None => {
+                run.failed_at = Some(round);
+                run.ran = Some(round);
+                return (Some(p), run);
+            }
         }
     }
-    Some(p)
+    run.ran = Some(max_rounds);
+    (Some(p), run)
 }
 
 /// K(u) of the drift and its knee given the present fit `p` (gains, time constants) on the
@@ -2672,5 +2815,107 @@ mod tests {
         // Without a reversible slope to keep (no table gain), nothing is held.
         let (free, _) = solve_slow(g, &b, &cols, 0, &nonneg, None, 0.0).unwrap();
         assert!((free.rows(0, n).sum() - 2.0 * g0).abs() < 1e-6);
+    }
+
+    /// The rounds a fit's memo says another `rounds` would run: a coupled set with a drift
+    /// stops at the first settled round from `rounds` on (at most `COUPLE_ROUNDS_MAX`), and
+    /// where the kept run never reached a round that call would check, it cannot say.
+    #[test]
+    fn the_memo_tells_which_rounds_a_call_would_run() {
+        let run = |settled: &[bool], failed_at| RoundsRun {
+            settled: settled.to_vec(),
+            failed_at,
+            ran: None,
+        };
+        // Settled first at round 2: rounds 1 and 2 stop there, rounds 3 runs on.
+        let r = run(&[false, false, true], None);
+        assert_eq!(rounds_to_run(true, true, 1, &r), Some(2));
+        assert_eq!(rounds_to_run(true, true, 2, &r), Some(2));
+        assert_eq!(rounds_to_run(true, true, 3, &r), None);
+        // Settled at round 1 already: rounds 1 stops at 1, rounds 2 at 2 (not known here).
+        let r = run(&[false, true], None);
+        assert_eq!(rounds_to_run(true, true, 1, &r), Some(1));
+        assert_eq!(rounds_to_run(true, true, 2, &r), None);
+        // Never settled: COUPLE_ROUNDS_MAX for any rounds up to it.
+        let r = run(&[false; COUPLE_ROUNDS_MAX], None);
+        for rounds in 1..=COUPLE_ROUNDS_MAX {
+            assert_eq!(
+                rounds_to_run(true, true, rounds, &r),
+                Some(COUPLE_ROUNDS_MAX)
+            );
+        }
+        // A failed solve stops every call that reaches it.
+        let r = run(&[false, false], Some(1));
+        assert_eq!(rounds_to_run(true, true, 1, &r), Some(1));
+        assert_eq!(rounds_to_run(true, true, 2, &r), Some(1));
+        // Without the coupling the rounds asked for run (one without the drift's K).
+        assert_eq!(rounds_to_run(false, true, 2, &run(&[], None)), Some(2));
+        assert_eq!(rounds_to_run(true, false, 2, &run(&[false], None)), Some(1));
+    }
+
+    /// A fit served from the regressors' memo is the fit itself, bit for bit, whichever
+    /// rounds asked for it first: on the full thesis stage's random levels (held levels, so
+    /// the drift's K(u) beside K'(u)), the coupled set of drift, hysteresis and curvature
+    /// asked with one round, two (the steps' candidates and the structure search) and one
+    /// more than `COUPLE_ROUNDS_MAX`, in several orders, against each fitted without the memo.
+    #[test]
+    fn a_kept_slow_fit_is_the_fit_itself() {
+        use crate::sim::synth::{Protocol, SynthSpec, synth};
+        let spec = SynthSpec {
+            model: "thesis-full".into(),
+            protocol: Protocol::Steps,
+            seed: 7,
+            seconds: 8.0,
+            rate: 1_000.0,
+            amplitude: 8.0,
+            offset: 1.0,
+            freq: 1.0,
+            freq_end: 100.0,
+            hold: Some(0.6),
+            noise_v: None,
+        };
+        let data = vec![Data::from_record("steps.csv", synth(&spec).unwrap()).unwrap()];
+        let base = ModelFile::built_in("thesis-linear").unwrap();
+        let y0: Vec<Vec<f64>> = data
+            .iter()
+            .map(|d| sim(&catalogue::without_slow(&base), d).unwrap())
+            .collect();
+        let set = ["drift", "hysteresis", "nonlinear-gain"];
+        assert_eq!(coupling(&data, &set), (true, true), "the set must couple");
+        let u_range = (1.0, 9.0);
+        let x = || {
+            let rows = solve_rows(&data, &base, &[1e-3]).unwrap();
+            slow_regressors(
+                &data,
+                rows,
+                &[],
+                base.plant.static_gain,
+                everett::CentreLine::Band,
+            )
+        };
+        let text = |p: &Option<SlowParams>| format!("{p:?}");
+        // (rounds 6 runs one more than COUPLE_ROUNDS_MAX where K'(u) does not settle: a memo
+        // that ignored the rounds would serve it the others' fit)
+        let asked = [1, 2, COUPLE_ROUNDS_MAX + 1];
+        let fresh: Vec<String> = asked
+            .iter()
+            .map(|&r| text(&fit_slow_once(&data, &y0, &x(), &set, u_range, r).0))
+            .collect();
+        assert!(fresh[0].contains("drift_poly: Some"), "{}", fresh[0]);
+        let mut distinct = fresh.clone();
+        distinct.sort();
+        distinct.dedup();
+        assert!(distinct.len() > 1, "every rounds asked gave one fit");
+        for order in [[0, 1, 2], [2, 1, 0], [1, 2, 0]] {
+            let x = x();
+            for i in order {
+                let kept = text(&fit_slow(&data, &y0, &x, &set, u_range, asked[i]));
+                assert_eq!(kept, fresh[i], "rounds {} in order {order:?}", asked[i]);
+            }
+            // A call whose rounds run as a kept fit's was served from the memo: one fit kept
+            // per distinct result.
+            let kept = x.fits.lock().map(|f| f.len()).unwrap_or(0);
+            assert_eq!(kept, distinct.len(), "fits kept in order {order:?}");
+        }
     }
 }
