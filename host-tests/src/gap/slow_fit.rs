@@ -103,7 +103,8 @@ struct KeptFit {
 /// run the same ones ([`rounds_to_run`]): the state after the same rounds is the same fit.
 #[derive(Clone, Debug, Default)]
 struct RoundsRun {
-    /// Per round reached: had K'(u) settled (`COUPLE_SETTLED`) at its start?
+    /// Per round reached, for a set that couples K'(u) with the table (empty otherwise): had
+    /// K'(u) settled (`COUPLE_SETTLED`) at its start?
     settled: Vec<bool>,
     /// The round whose solve failed (the loop stops there with the fit before it).
     failed_at: Option<usize>,
@@ -113,10 +114,12 @@ struct RoundsRun {
 }
 
 /// The rounds [`fit_slow`] runs in full with `rounds` asked for, given how they went
-/// (`run.settled`, `run.failed_at`); `None` where `run` does not reach far enough to say. A
-/// coupled set (K'(u) beside a drift's K) runs `max(rounds, COUPLE_ROUNDS_MAX)` at most and
-/// stops at the first round from `rounds` on that starts settled; the others run `rounds`
-/// (one without the drift's K).
+/// (`run.settled`, `run.failed_at`); `None` where a coupled run does not reach a round the
+/// call would check. A coupled set (K'(u) beside a drift's K) runs
+/// `max(rounds, COUPLE_ROUNDS_MAX)` at most and stops at the first round from `rounds` on that
+/// starts settled; the others run `rounds` (one without the drift's K), an answer that may
+/// reach past the kept run: the memo serves a call only where the answer is the kept run's
+/// own `ran`.
 fn rounds_to_run(couple: bool, has_drift: bool, rounds: usize, run: &RoundsRun) -> Option<usize> {
     let (rounds, max_rounds) = round_limits(couple, has_drift, rounds);
     for round in 0..max_rounds {
@@ -822,10 +825,12 @@ fn gram_new_lags(x: &SlowRegressors, g_base: &DMatrix<f64>) -> DMatrix<f64> {
 /// `u_range` is the range the model file gets for K'(u) and K(u) below its knee
 /// ([`catalogue::with_slow`]), so a K accepted here is one the stage accepts.
 ///
-/// A fit these regressors ran before against the same `y0` (to the bit), set and span, whose
-/// rounds went as this call's would ([`rounds_to_run`]), is not run again: the diagnosis fits
-/// the same set more than once ([`FITS_KEPT`]), and the fit is a function of these alone (the
-/// records are the ones the regressors were made for), so the kept result is the fit itself.
+/// A fit these regressors ran before against the same `y0` (every bit, as a 64-bit hash, as
+/// the products' key), set and span, whose rounds went as this call's would
+/// ([`rounds_to_run`]), is not run again: the diagnosis fits the same set more than once
+/// ([`FITS_KEPT`]), and the fit depends on these and the regressors alone (the records are
+/// the ones the regressors were made for; their lazily computed Gram matrix, moments and
+/// products are read only at their final values), so the kept result is the fit itself.
 pub(super) fn fit_slow(
     data: &[Data],
     y0: &[Vec<f64>],
@@ -2902,6 +2907,9 @@ mod tests {
             .map(|&r| text(&fit_slow_once(&data, &y0, &x(), &set, u_range, r).0))
             .collect();
         assert!(fresh[0].contains("drift_poly: Some"), "{}", fresh[0]);
+        // (K'(u) does not settle after the first round here: rounds 1 and 2 run the same
+        // rounds, so the later of the two must be served from the memo)
+        assert_eq!(fresh[0], fresh[1], "rounds 1 and 2 ran different rounds");
         let mut distinct = fresh.clone();
         distinct.sort();
         distinct.dedup();
@@ -2916,6 +2924,17 @@ mod tests {
             // per distinct result.
             let kept = x.fits.lock().map(|f| f.len()).unwrap_or(0);
             assert_eq!(kept, distinct.len(), "fits kept in order {order:?}");
+            // Asked again, each is served from the memo: nothing more is kept.
+            for i in order {
+                let again = text(&fit_slow(&data, &y0, &x, &set, u_range, asked[i]));
+                assert_eq!(again, fresh[i], "rounds {} asked again", asked[i]);
+            }
+            let kept = x.fits.lock().map(|f| f.len()).unwrap_or(0);
+            assert_eq!(
+                kept,
+                distinct.len(),
+                "fits kept after asking again in {order:?}"
+            );
         }
     }
 }
