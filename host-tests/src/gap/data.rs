@@ -20,7 +20,7 @@ use super::constants::{
 };
 use crate::io::csv::Record;
 use crate::io::model_file::ModelFile;
-use crate::sim::open_loop::simulate_after;
+use crate::sim::open_loop::simulate_after_while;
 use crate::util::median;
 use anyhow::{Context, bail, ensure};
 use std::collections::VecDeque;
@@ -825,6 +825,16 @@ fn memo_key(m: &mut ModelFile) -> Option<String> {
 /// Simulate `model` (without sensor noise) on a record; a simulation the record's
 /// [`SimMemo`] holds is not run again.
 pub fn sim(model: &ModelFile, d: &Data) -> anyhow::Result<Vec<f64>> {
+    Ok(sim_while(model, d, |_, _| true)?.unwrap_or_default())
+}
+
+/// [`sim`], stopped (`None`, nothing kept) as soon as `go_on(i, y_i)` says no; a kept
+/// simulation is answered whole without asking.
+fn sim_while(
+    model: &ModelFile,
+    d: &Data,
+    go_on: impl FnMut(usize, f64) -> bool,
+) -> anyhow::Result<Option<Vec<f64>>> {
     let mut m = model.clone();
     m.converters.noise_v = 0.0;
     // Without noise the seed changes nothing: one key for every seed.
@@ -832,14 +842,50 @@ pub fn sim(model: &ModelFile, d: &Data) -> anyhow::Result<Vec<f64>> {
     let key = memo_key(&mut m);
     let input = input_fingerprint(d);
     if let Some(y) = key.as_deref().and_then(|k| d.memo.get(k, input)) {
-        return Ok(y.as_ref().clone());
+        return Ok(Some(y.as_ref().clone()));
     }
     let stage = m.build_stage()?;
-    let y = simulate_after(&stage, m.period_s, &m.start_history_v(), &d.t_s, &d.u_v);
+    let history = m.start_history_v();
+    let Some(y) = simulate_after_while(&stage, m.period_s, &history, &d.t_s, &d.u_v, go_on) else {
+        return Ok(None);
+    };
     if let Some(k) = key {
         d.memo.put(k, input, Arc::new(y.clone()));
     }
-    Ok(y)
+    Ok(Some(y))
+}
+
+/// Samples between two checks of [`cost_term_below`]'s bound (our assumption: a logarithm
+/// per this many samples is nothing beside the stage's steps).
+const COST_CHECK_SAMPLES: usize = 512;
+
+/// Record `d`'s term `n ln max(MSE, 1e-14)` in a fast search's cost for `model` ([`sim`],
+/// [`mse`]; `n` the record's length), or `f64::INFINITY` as soon as the samples simulated show
+/// that `before + term` exceeds `bound` (that simulation is neither finished nor kept). The
+/// running sum of squares is a prefix of [`mse`]'s own sum, in its order and from its first
+/// sample, so it never exceeds the whole: a term is cut short only where it would have
+/// exceeded the bound, and a term computed in full is [`mse`]'s to the bit.
+pub fn cost_term_below(
+    model: &ModelFile,
+    d: &Data,
+    before: f64,
+    bound: f64,
+) -> anyhow::Result<f64> {
+    let n = d.len() as f64;
+    // (`mse`'s divisor: the shorter of the record and the simulation)
+    let n_mse = d.y_v.len().min(d.t_s.len().min(d.u_v.len())).max(1) as f64;
+    let mut sum = 0.0;
+    let go_on = |i: usize, y: f64| {
+        if let Some(&m) = d.y_v.get(i) {
+            sum += (m - y) * (m - y);
+        }
+        !((i + 1).is_multiple_of(COST_CHECK_SAMPLES)
+            && before + n * (sum / n_mse).max(1e-14).ln() > bound)
+    };
+    Ok(match sim_while(model, d, go_on)? {
+        Some(y) => n * mse(&d.y_v, &y).max(1e-14).ln(),
+        None => f64::INFINITY,
+    })
 }
 
 /// [`sim`] of `model` on every record, and each record's mean square residual.
@@ -1225,6 +1271,54 @@ mod tests {
                 .zip(&first)
                 .any(|(a, b)| (a - b).abs() > 0.1 * peak)
         );
+    }
+
+    /// A bounded cost term is the term itself, bit for bit, wherever the bound is not passed
+    /// (any bound at or above `before` plus the term); below, it is the term or infinite, and
+    /// infinite once a check (every [`COST_CHECK_SAMPLES`] samples) has seen the bound passed:
+    /// here a uniform misfit, whose check at sample `k` sees `n ln(k / n)` less than the whole.
+    #[test]
+    fn a_bounded_cost_term_is_the_term_or_infinite_above_its_bound() {
+        let mut d = sine_record();
+        let n = d.len();
+        let m = ModelFile::built_in("thesis-linear").unwrap();
+        let y = sim(&m, &d).unwrap();
+        d.y_v = y.iter().map(|v| v + 0.05).collect();
+        d.memo = SimMemo::default();
+        let m2 = m.clone();
+        let exact = n as f64 * mse(&d.y_v, &sim(&m2, &sine_record_like(&d)).unwrap()).ln();
+        // What the first and the last checks see below the whole term.
+        let seen_at = |k: usize| n as f64 * (k as f64 / n as f64).ln();
+        let first_check = seen_at(COST_CHECK_SAMPLES);
+        let last_check = seen_at(n / COST_CHECK_SAMPLES * COST_CHECK_SAMPLES);
+        for before in [0.0, -123.4, 5e3] {
+            let term = |bound: f64| cost_term_below(&m2, &sine_record_like(&d), before, bound);
+            let term = |bound: f64| term(bound).unwrap();
+            assert_eq!(term(f64::INFINITY).to_bits(), exact.to_bits());
+            assert_eq!(term(before + exact).to_bits(), exact.to_bits());
+            assert_eq!(term(before + exact + 1.0).to_bits(), exact.to_bits());
+            let just_below = term(before + exact - 1e-9 * exact.abs());
+            assert!(just_below == f64::INFINITY || just_below.to_bits() == exact.to_bits());
+            assert_eq!(term(before + exact + 1.2 * first_check), f64::INFINITY);
+            assert_eq!(
+                term(before + exact + 0.5 * last_check).to_bits(),
+                exact.to_bits()
+            );
+        }
+        // A simulation cut short is not kept: asked whole afterwards, it is simulated whole.
+        let e = sine_record_like(&d);
+        assert_eq!(
+            cost_term_below(&m2, &e, 0.0, f64::NEG_INFINITY).unwrap(),
+            f64::INFINITY
+        );
+        assert_eq!(sim(&m2, &e).unwrap().len(), n);
+    }
+
+    /// `d`'s record with an empty memo.
+    fn sine_record_like(d: &Data) -> Data {
+        let mut e = d.clone();
+        e.memo = SimMemo::default();
+        e
     }
 
     /// The memo's key tells apart tables one bit apart in one value, and one model from the

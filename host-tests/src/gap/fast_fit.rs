@@ -6,9 +6,9 @@
 //! records, each candidate simulated with the whole current model.
 
 use super::catalogue;
-use super::data::{Data, mse, sim};
+use super::data::{Data, cost_term_below};
 use crate::io::model_file::ModelFile;
-use crate::util::golden;
+use crate::util::{GOLDEN_ITERATIONS, golden_below};
 
 /// Fit a fast effect on the fast records: returns the model and its cost
 /// `sum n_r ln MSE_r` over those records.
@@ -20,16 +20,24 @@ pub(super) fn fit_fast(
     peak_hz: f64,
 ) -> Option<(ModelFile, f64)> {
     let spec = catalogue::fast_spec(effect)?;
-    let cost = |m: &ModelFile| -> f64 {
+    // The cost, or infinity once it is known to exceed `bound`: the last record's simulation
+    // stops there (`cost_term_below`; the others' terms are needed whole for the sum).
+    let cost_below = |m: &ModelFile, bound: f64| -> f64 {
         let mut c = 0.0;
-        for &i in idx {
-            match sim(m, &data[i]) {
-                Ok(s) => c += data[i].len() as f64 * mse(&data[i].y_v, &s).max(1e-14).ln(),
+        for (k, &i) in idx.iter().enumerate() {
+            let bound = if k + 1 == idx.len() {
+                bound
+            } else {
+                f64::INFINITY
+            };
+            match cost_term_below(m, &data[i], c, bound) {
+                Ok(t) => c += t,
                 Err(_) => return f64::INFINITY,
             }
         }
         c
     };
+    let cost = |m: &ModelFile| cost_below(m, f64::INFINITY);
     let (x0, z0) = catalogue::fast_value(model, effect).unwrap_or((f64::NAN, 0.05));
     let to = |x: f64| if spec.log { x.ln() } else { x };
     let from = |x: f64| if spec.log { x.exp() } else { x };
@@ -53,7 +61,7 @@ pub(super) fn fit_fast(
     }
     for &zz in &zs {
         for &x in &xs {
-            let c = cost(&catalogue::with_fast(model, effect, from(x), zz));
+            let c = cost_below(&catalogue::with_fast(model, effect, from(x), zz), best.0);
             if c < best.0 {
                 best = (c, x);
                 z = zz;
@@ -61,29 +69,41 @@ pub(super) fn fit_fast(
         }
     }
     if x0.is_finite() {
-        let c = cost(&catalogue::with_fast(model, effect, x0, z0));
+        let c = cost_below(&catalogue::with_fast(model, effect, x0, z0), best.0);
         if c < best.0 {
             best = (c, to(x0));
             z = z0;
         }
     }
     let h = (b - a) / grid as f64;
-    let x = golden(best.1 - h, best.1 + h, a, b, |x| {
-        cost(&catalogue::with_fast(model, effect, from(x), z))
-    });
+    // (the golden searches compare each new point with one other: its cost is the bound)
+    let x = golden_below(
+        best.1 - h,
+        best.1 + h,
+        a,
+        b,
+        GOLDEN_ITERATIONS,
+        |x, bound| cost_below(&catalogue::with_fast(model, effect, from(x), z), bound),
+    );
     let mut xbest = from(x);
     if effect == "resonance" {
-        let lz = golden(
+        let lz = golden_below(
             (z / 3.0).ln(),
             (z * 3.0).ln(),
             (0.005f64).ln(),
             (0.5f64).ln(),
-            |lz| cost(&catalogue::with_fast(model, effect, xbest, lz.exp())),
+            GOLDEN_ITERATIONS,
+            |lz, bound| cost_below(&catalogue::with_fast(model, effect, xbest, lz.exp()), bound),
         );
         z = lz.exp();
-        let x2 = golden(to(xbest) - h / 2.0, to(xbest) + h / 2.0, a, b, |x| {
-            cost(&catalogue::with_fast(model, effect, from(x), z))
-        });
+        let x2 = golden_below(
+            to(xbest) - h / 2.0,
+            to(xbest) + h / 2.0,
+            a,
+            b,
+            GOLDEN_ITERATIONS,
+            |x, bound| cost_below(&catalogue::with_fast(model, effect, from(x), z), bound),
+        );
         xbest = from(x2);
     }
     let m = catalogue::with_fast(model, effect, xbest, z);

@@ -26,10 +26,24 @@ pub fn simulate_after(
     t_s: &[f64],
     u_v: &[f64],
 ) -> Vec<f64> {
+    simulate_after_while(stage, period_s, history_v, t_s, u_v, |_, _| true).unwrap_or_default()
+}
+
+/// [`simulate_after`], stopped as soon as `go_on(i, y_i)` (called with each reading in turn)
+/// says no: `None` then, the readings otherwise. A search that needs a simulation only if it
+/// beats a bound stops this way once the part simulated already shows that it cannot.
+pub fn simulate_after_while(
+    stage: &Stage,
+    period_s: f64,
+    history_v: &[f32],
+    t_s: &[f64],
+    u_v: &[f64],
+    mut go_on: impl FnMut(usize, f64) -> bool,
+) -> Option<Vec<f64>> {
     let n = t_s.len().min(u_v.len());
     let mut y = Vec::with_capacity(n);
     if n == 0 {
-        return y;
+        return Some(y);
     }
     let t0 = t_s[0];
     let mut s = stage.steady_state_after(history_v, u_v[0] as f32);
@@ -51,9 +65,12 @@ pub fn simulate_after(
             last = stage.step(&mut s, held);
             k += 1;
         }
+        if !go_on(i, last as f64) {
+            return None;
+        }
         y.push(last as f64);
     }
-    y
+    Some(y)
 }
 
 #[cfg(test)]
