@@ -864,7 +864,9 @@ const COST_CHECK_SAMPLES: usize = 512;
 /// that `before + term` exceeds `bound` (that simulation is neither finished nor kept). The
 /// running sum of squares is a prefix of [`mse`]'s own sum, in its order and from its first
 /// sample, so it never exceeds the whole: a term is cut short only where it would have
-/// exceeded the bound, and a term computed in full is [`mse`]'s to the bit.
+/// exceeded the bound, and a term computed in full is [`mse`]'s to the bit. (This takes the
+/// logarithm as monotone; a libm whose last bit is not could err only where the cost ties the
+/// bound to that bit.)
 pub fn cost_term_below(
     model: &ModelFile,
     d: &Data,
@@ -875,15 +877,24 @@ pub fn cost_term_below(
     // (`mse`'s divisor: the shorter of the record and the simulation)
     let n_mse = d.y_v.len().min(d.t_s.len().min(d.u_v.len())).max(1) as f64;
     let mut sum = 0.0;
+    // (A simulation whose misfit is not finite, a diverging candidate's, costs infinity, cut
+    // or whole: `f64::max` would take a NaN mean square for the best fit there is.)
     let go_on = |i: usize, y: f64| {
         if let Some(&m) = d.y_v.get(i) {
             sum += (m - y) * (m - y);
         }
         !((i + 1).is_multiple_of(COST_CHECK_SAMPLES)
-            && before + n * (sum / n_mse).max(1e-14).ln() > bound)
+            && (!sum.is_finite() || before + n * (sum / n_mse).max(1e-14).ln() > bound))
     };
     Ok(match sim_while(model, d, go_on)? {
-        Some(y) => n * mse(&d.y_v, &y).max(1e-14).ln(),
+        Some(y) => {
+            let e = mse(&d.y_v, &y);
+            if e.is_finite() {
+                n * e.max(1e-14).ln()
+            } else {
+                f64::INFINITY
+            }
+        }
         None => f64::INFINITY,
     })
 }

@@ -902,6 +902,10 @@ fn centre_line(e: &[f32], range: (f64, f64)) -> Box<dyn Fn(f64) -> f64> {
 /// (the table holds its last input there, which this reduction does not model). On a 50 kHz
 /// sine thinned to [`super::slow_fit::MAX_SLOW_ROWS`] rows, a tenth of the samples or fewer.
 fn table_path(u_v: &[f64], rows: &[usize]) -> Vec<usize> {
+    debug_assert!(
+        rows.windows(2).all(|w| w[0] < w[1]) && rows.last().is_none_or(|&r| r < u_v.len()),
+        "rows rising and within the record"
+    );
     let Some(&last) = rows.last() else {
         return Vec::new();
     };
