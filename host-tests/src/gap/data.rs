@@ -855,11 +855,18 @@ fn sim_while(
     Ok(Some(y))
 }
 
+/// A record's Gaussian log-likelihood term for the searches' costs and the BIC scores:
+/// `n ln MSE` over its `n` samples, the mean square held to at least 1e-14 V^2 (our
+/// assumption: far below any record's noise, it keeps a perfect fit's logarithm finite).
+pub fn log_mse_term(n: f64, mse: f64) -> f64 {
+    n * mse.max(1e-14).ln()
+}
+
 /// Samples between two checks of [`cost_term_below`]'s bound (our assumption: a logarithm
 /// per this many samples is nothing beside the stage's steps).
 const COST_CHECK_SAMPLES: usize = 512;
 
-/// Record `d`'s term `n ln max(MSE, 1e-14)` in a fast search's cost for `model` ([`sim`],
+/// Record `d`'s term ([`log_mse_term`]) in a fast search's cost for `model` ([`sim`],
 /// [`mse`]; `n` the record's length), or `f64::INFINITY` as soon as the samples simulated show
 /// that `before + term` exceeds `bound` (that simulation is neither finished nor kept). The
 /// running sum of squares is a prefix of [`mse`]'s own sum, in its order and from its first
@@ -884,13 +891,13 @@ pub fn cost_term_below(
             sum += (m - y) * (m - y);
         }
         !((i + 1).is_multiple_of(COST_CHECK_SAMPLES)
-            && (!sum.is_finite() || before + n * (sum / n_mse).max(1e-14).ln() > bound))
+            && (!sum.is_finite() || before + log_mse_term(n, sum / n_mse) > bound))
     };
     Ok(match sim_while(model, d, go_on)? {
         Some(y) => {
             let e = mse(&d.y_v, &y);
             if e.is_finite() {
-                n * e.max(1e-14).ln()
+                log_mse_term(n, e)
             } else {
                 f64::INFINITY
             }
@@ -1296,14 +1303,13 @@ mod tests {
         let y = sim(&m, &d).unwrap();
         d.y_v = y.iter().map(|v| v + 0.05).collect();
         d.memo = SimMemo::default();
-        let m2 = m.clone();
-        let exact = n as f64 * mse(&d.y_v, &sim(&m2, &sine_record_like(&d)).unwrap()).ln();
+        let exact = n as f64 * mse(&d.y_v, &sim(&m, &sine_record_like(&d)).unwrap()).ln();
         // What the first and the last checks see below the whole term.
         let seen_at = |k: usize| n as f64 * (k as f64 / n as f64).ln();
         let first_check = seen_at(COST_CHECK_SAMPLES);
         let last_check = seen_at(n / COST_CHECK_SAMPLES * COST_CHECK_SAMPLES);
         for before in [0.0, -123.4, 5e3] {
-            let term = |bound: f64| cost_term_below(&m2, &sine_record_like(&d), before, bound);
+            let term = |bound: f64| cost_term_below(&m, &sine_record_like(&d), before, bound);
             let term = |bound: f64| term(bound).unwrap();
             assert_eq!(term(f64::INFINITY).to_bits(), exact.to_bits());
             assert_eq!(term(before + exact).to_bits(), exact.to_bits());
@@ -1319,10 +1325,10 @@ mod tests {
         // A simulation cut short is not kept: asked whole afterwards, it is simulated whole.
         let e = sine_record_like(&d);
         assert_eq!(
-            cost_term_below(&m2, &e, 0.0, f64::NEG_INFINITY).unwrap(),
+            cost_term_below(&m, &e, 0.0, f64::NEG_INFINITY).unwrap(),
             f64::INFINITY
         );
-        assert_eq!(sim(&m2, &e).unwrap().len(), n);
+        assert_eq!(sim(&m, &e).unwrap().len(), n);
     }
 
     /// `d`'s record with an empty memo.

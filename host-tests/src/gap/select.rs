@@ -20,8 +20,8 @@ use super::constants::{
     STRUCTURE_ROUNDS,
 };
 use super::data::{
-    Data, LineFit, NoiseFloor, min_max, mse, noise_floor_of, sim, simulate_all, swapped_columns,
-    without_glitches,
+    Data, LineFit, NoiseFloor, log_mse_term, min_max, mse, noise_floor_of, sim, simulate_all,
+    swapped_columns, without_glitches,
 };
 use super::everett::CentreLine;
 use super::fast_fit::fit_fast;
@@ -303,7 +303,7 @@ fn set_score(data: &[Data], ms: &[f64], set: &[String]) -> f64 {
     let n_all: f64 = data.iter().map(|d| d.len() as f64).sum();
     data.iter()
         .zip(ms)
-        .map(|(d, m)| d.len() as f64 * m.max(1e-14).ln())
+        .map(|(d, m)| log_mse_term(d.len() as f64, *m))
         .sum::<f64>()
         + set
             .iter()
@@ -2307,7 +2307,7 @@ fn candidates(
     };
     let cur_fast_cost: f64 = fast_idx
         .iter()
-        .map(|&i| data[i].len() as f64 * cur_mse[i].max(1e-14).ln())
+        .map(|&i| log_mse_term(data[i].len() as f64, cur_mse[i]))
         .sum();
     let n_fast: f64 = fast_idx.iter().map(|&i| data[i].len() as f64).sum();
     let fast_fit = |e: &str| -> Option<ModelFile> {
