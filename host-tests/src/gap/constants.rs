@@ -2,6 +2,10 @@
 //! assumption and what it was calibrated on (mostly the hidden-effect tests of
 //! `tests/gap.rs`).
 
+/// The least mean square (and noise variance) a score or a ratio takes, V^2 (our assumption:
+/// far below any record's noise, 1e-7 V RMS, it keeps a perfect fit's logarithm and a ratio's
+/// divisor finite).
+pub const MSE_MIN_V2: f64 = 1e-14;
 /// Fraction of the residual power above the noise floor a candidate must explain to be added
 /// (our assumption, calibrated on the hidden-effect tests).
 pub const MIN_EXPLAINED: f64 = 0.1;

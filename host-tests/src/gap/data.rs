@@ -856,10 +856,10 @@ fn sim_while(
 }
 
 /// A record's Gaussian log-likelihood term for the searches' costs and the BIC scores:
-/// `n ln MSE` over its `n` samples, the mean square held to at least 1e-14 V^2 (our
-/// assumption: far below any record's noise, it keeps a perfect fit's logarithm finite).
+/// `n ln MSE` over its `n` samples, the mean square held to at least
+/// [`super::constants::MSE_MIN_V2`].
 pub fn log_mse_term(n: f64, mse: f64) -> f64 {
-    n * mse.max(1e-14).ln()
+    n * mse.max(super::constants::MSE_MIN_V2).ln()
 }
 
 /// Samples between two checks of [`cost_term_below`]'s bound (our assumption: a logarithm

@@ -14,10 +14,10 @@ use super::constants::{
     CANDIDATE_ROUNDS, CANNOT_TELL_RATIO, CLIP_MIN_SAMPLES, CLIP_MIN_SHARE, CREEP_START_MIN_FLOORS,
     CREEP_START_SHARE, CREEP_START_UNPINNED_SHARE, DRIFT_TAIL_KEEP_NOISE, DRIFT_TAIL_MIN_NOISE,
     FOLLOW_MIN_CORRELATION, HELD_LOOP_OVER_TAIL, HOLD_MIN_S, HYST_LOOP_MIN_NOISE, MAX_STEPS,
-    MIN_EXPLAINED, OCCAM_SWAP_RATIO, PAIR_FLOOR_RATIO, PRUNE_KEEP_EXCESS_VAR, PRUNE_PER_PARAM,
-    PRUNE_RATIO, REST_ZERO_INPUT_V, REST_ZERO_SHOWN_MIN, REST_ZERO_SIGMAS, REVERSED_CORRELATION,
-    REVERSED_MIN_FLOORS, RISE_CHOICE_RATIO, SCALE_APART_MAX, STATIC_TELL_RATIO, STOP_FLOOR_RATIO,
-    STRUCTURE_ROUNDS,
+    MIN_EXPLAINED, MSE_MIN_V2, OCCAM_SWAP_RATIO, PAIR_FLOOR_RATIO, PRUNE_KEEP_EXCESS_VAR,
+    PRUNE_PER_PARAM, PRUNE_RATIO, REST_ZERO_INPUT_V, REST_ZERO_SHOWN_MIN, REST_ZERO_SIGMAS,
+    REVERSED_CORRELATION, REVERSED_MIN_FLOORS, RISE_CHOICE_RATIO, SCALE_APART_MAX,
+    STATIC_TELL_RATIO, STOP_FLOOR_RATIO, STRUCTURE_ROUNDS,
 };
 use super::data::{
     Data, LineFit, NoiseFloor, log_mse_term, min_max, mse, noise_floor_of, sim, simulate_all,
@@ -769,7 +769,7 @@ pub fn diagnose(base: &ModelFile, data: &[Data], opts: &Options) -> anyhow::Resu
         None => f,
     })
     .collect();
-    let var: Vec<f64> = noise.iter().map(|s| (s * s).max(1e-14)).collect();
+    let var: Vec<f64> = noise.iter().map(|s| (s * s).max(MSE_MIN_V2)).collect();
     let noise_floor_v = (var.iter().sum::<f64>() / var.len() as f64).sqrt();
     // (a record clipped by its sensor or logger is refused on its own samples: the cleaning
     // below moves them)
@@ -1015,7 +1015,10 @@ fn diagnose_split(
             let n_set: usize = set.iter().map(|&i| data[i].len()).sum();
             let score: f64 = set
                 .iter()
-                .map(|&i| data[i].len() as f64 * (c.mse[i].max(1e-14) / cur_mse[i].max(1e-14)).ln())
+                .map(|&i| {
+                    data[i].len() as f64
+                        * (c.mse[i].max(MSE_MIN_V2) / cur_mse[i].max(MSE_MIN_V2)).ln()
+                })
                 .sum::<f64>()
                 + c.k as f64 * (n_set as f64).ln();
             let ex = |m: &[f64]| set.iter().map(|&i| (m[i] - var[i]).max(0.0)).sum::<f64>();

@@ -27,6 +27,7 @@
 //! free Preisach boundary would be as many parameters as the table has and could mop up any
 //! first-second residual: the candidates are the states a lab's stage is left in).
 
+use super::constants::MSE_MIN_V2;
 use super::data::{Data, mse, sim};
 use super::everett::{start_candidates, start_memory};
 use super::select::refit_slow;
@@ -230,7 +231,7 @@ pub fn search(
                     }
                 }
                 // Records weigh by their own residual power, as the selection's score does.
-                delta += (e_new - e_now) / (d.len() as f64 * ms_now[r].max(1e-14));
+                delta += (e_new - e_now) / (d.len() as f64 * ms_now[r].max(MSE_MIN_V2));
             }
             Some(delta)
         };
@@ -318,7 +319,7 @@ pub fn search(
         let score: f64 = data
             .iter()
             .zip(ms.iter().zip(&ms_now))
-            .map(|(d, (a, b))| d.len() as f64 * (a.max(1e-14) / b.max(1e-14)).ln())
+            .map(|(d, (a, b))| d.len() as f64 * (a.max(MSE_MIN_V2) / b.max(MSE_MIN_V2)).ln())
             .sum::<f64>()
             + START_PARAMS as f64 * n_all.ln();
         if !no_worse || ms.iter().sum::<f64>() >= ms_now.iter().sum::<f64>() || score >= 0.0 {
