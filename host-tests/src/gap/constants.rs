@@ -268,6 +268,27 @@ pub const CREEP_START_MIN_FLOORS: f64 = 5.0;
 /// 10 kHz, sec. 2.4). Slower noise is not told from a slow effect.
 pub const NOISE_DECORRELATE_MAX_S: f64 = 8e-3;
 
+/// Whole cycles of a periodic input a record must hold for the noise that does not repeat
+/// with it to be read ([`super::cycle_noise`]; our assumption: the median of the cycles'
+/// mean squares needs several cycles beside a start transient, and the cycles' mean holds
+/// `1 / C` of the noise; a 10 s record of a 1 Hz sine holds 9 from its first rising crossing).
+pub const CYCLE_NOISE_MIN_CYCLES: usize = 8;
+/// How far above the median of its neighbours a bin of the spectrum of a residual's part that
+/// does not repeat with a periodic input is held before that part is read as noise
+/// ([`super::cycle_noise`]; our assumption: a Welch average over eight or more segments puts
+/// a noise bin above 5x its neighbours' median about once in 10^4, a line tens of times).
+pub const CYCLE_NOISE_LINE_RATIO: f64 = 5.0;
+/// How far the lengths of a periodic input's cycles may spread, as a share of its period
+/// ([`super::cycle_noise`]; our assumption: a generator's period is exact, and a measured
+/// input's crossings move by its noise over its slope, far below 1 %; a sweep's cycles
+/// change by more).
+pub const CYCLE_PERIOD_SPREAD: f64 = 0.01;
+/// How much of a periodic input's standard deviation its cycles' mean may leave
+/// ([`super::cycle_noise`]; our assumption: a sampled generator repeats to its rounding, a
+/// measured input to its noise, both far below 1 %; a decaying sine or random levels leave
+/// tens of percent).
+pub const CYCLE_INPUT_RESIDUE: f64 = 0.01;
+
 /// How much the noise estimate must grow from one stride to the next (twice as long) for the
 /// noise to count as still correlated ([`super::data::strided_floor`]; our assumption: on
 /// white noise two strides' estimates agree within 2 % over a thousand samples and within

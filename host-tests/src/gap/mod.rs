@@ -63,6 +63,7 @@
 
 pub mod catalogue;
 pub mod constants;
+pub mod cycle_noise;
 pub mod data;
 pub mod demo;
 pub mod everett;

@@ -1976,13 +1976,15 @@ fn diagnose_split(
             ),
         });
     }
-    let unexplained = locate(data, &sims, &noise);
+    let (unexplained, cycle_notes) = locate(data, &sims, &noise);
     let final_rms_v = (cur_mse.iter().sum::<f64>() / cur_mse.len() as f64).sqrt();
+    let mut noise_notes = setup.noise_notes.clone();
+    noise_notes.extend(cycle_notes);
     Ok(Diagnosis {
         named,
         steps,
         record_noise_v: noise,
-        noise_notes: setup.noise_notes.clone(),
+        noise_notes,
         glitches: setup.glitches.clone(),
         hum: setup.hum.clone(),
         noise_floor_v,

@@ -19,6 +19,7 @@
 //! `rms_v` is the residual RMS with the noise floor taken out in quadrature, the root of the
 //! mean over records of `max(MSE_r - floor_r^2, 0)`: the part a model could still explain.
 
+use super::cycle_noise::cycle_noise_v;
 use super::data::{Data, min_max};
 use super::signatures::averaged_spectrum;
 
@@ -36,13 +37,37 @@ pub struct Unexplained {
     pub where_: String,
 }
 
-/// The unexplained residual of `y - sims`, if some record stays above the bar.
-pub fn locate(data: &[Data], sims: &[Vec<f64>], noise: &[f64]) -> Option<Unexplained> {
+/// The unexplained residual of `y - sims`, if some record stays above the bar, and a note for
+/// each record whose bar was set by the noise its residual holds between a periodic input's
+/// cycles rather than by its floor `noise` ([`cycle_noise_v`], where that is the larger).
+pub fn locate(
+    data: &[Data],
+    sims: &[Vec<f64>],
+    noise: &[f64],
+) -> (Option<Unexplained>, Vec<String>) {
     let mut parts = Vec::new();
+    let mut notes = Vec::new();
     let mut excess = 0.0;
-    for ((d, y), f) in data.iter().zip(sims).zip(noise) {
+    for ((d, y), &floor) in data.iter().zip(sims).zip(noise) {
         let r: Vec<f64> = d.y_v.iter().zip(y).map(|(a, b)| a - b).collect();
         let ms = r.iter().map(|e| e * e).sum::<f64>() / r.len().max(1) as f64;
+        // (judged only where the floor alone would leave the record unexplained)
+        let f = match cycle_noise_v(d, &r) {
+            Some(c) if c > floor && ms.sqrt() > UNEXPLAINED_FLOOR_RATIO * floor => {
+                notes.push(format!(
+                    "{}: its residual holds {:.2} mV of noise that does not repeat with the \
+                     input's cycles (above its fundamental), {:.2}x the floor read from its \
+                     fast part: noise at low frequencies, which no effect of a stage driven \
+                     so makes; the residual ({:.2} mV) is judged against it",
+                    d.name,
+                    1e3 * c,
+                    c / floor.max(1e-12),
+                    1e3 * ms.sqrt()
+                ));
+                c
+            }
+            _ => floor,
+        };
         excess += (ms - f * f).max(0.0);
         if ms.sqrt() > UNEXPLAINED_FLOOR_RATIO * f {
             parts.push(format!(
@@ -55,12 +80,13 @@ pub fn locate(data: &[Data], sims: &[Vec<f64>], noise: &[f64]) -> Option<Unexpla
         }
     }
     if parts.is_empty() {
-        return None;
+        return (None, notes);
     }
-    Some(Unexplained {
+    let u = Unexplained {
         rms_v: (excess / data.len().max(1) as f64).sqrt(),
         where_: parts.join("; "),
-    })
+    };
+    (Some(u), notes)
 }
 
 /// Where the residual `r` of record `d` sits, in words.
@@ -275,7 +301,7 @@ mod tests {
             .map(|(v, &x)| v + 3e-3 * (2.0 * std::f64::consts::PI * line_hz * x + 0.3).sin())
             .collect();
         let d = Data::from_record("r.csv", Record::new(t, u, Some(y), None).unwrap()).unwrap();
-        locate(&[d], &[sim], &[1e-4]).unwrap().where_
+        locate(&[d], &[sim], &[1e-4]).0.unwrap().where_
     }
 
     /// The residual's strongest line is told as the records show it: on a mains frequency the
