@@ -35,7 +35,8 @@
 //! splits within
 //! [`CANNOT_TELL_RATIO`] of each other and the diagnosis names hysteresis without ending at
 //! the floor, they run under the other split too and the diagnosis that explains every
-//! record (within 2x its floor) is kept where only one does, else the one naming fewer
+//! record (within 2x its floor, or of the noise between a periodic input's cycles where that
+//! is larger: [`cycle_noise`]) is kept where only one does, else the one naming fewer
 //! effects.
 //!
 //! # What it trades

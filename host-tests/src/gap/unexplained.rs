@@ -1,7 +1,9 @@
 //! Never silent (issue #12, item 5): when the workflow stops with some record's residual still
 //! above [`UNEXPLAINED_FLOOR_RATIO`] times its noise floor, the part no catalogued effect
 //! explained is reported, with where it sits, in the table, the report and the JSON
-//! (`"unexplained": {"rms_v", "where"}`).
+//! (`"unexplained": {"rms_v", "where"}`). Where the record's input repeats, the bar is set by
+//! the larger of the floor and the noise the residual holds between the input's cycles
+//! ([`cycle_noise_v`]: a sensor's low-frequency noise, which the floor does not count).
 //!
 //! Where, per record above the bar, from the final residual alone (no assumption of holds,
 //! edges or a fast/slow pair):
@@ -16,8 +18,9 @@
 //!   of the input's own line, or a line the input does not drive, on a mains frequency
 //!   (interference in the measurement?) or not.
 //!
-//! `rms_v` is the residual RMS with the noise floor taken out in quadrature, the root of the
-//! mean over records of `max(MSE_r - floor_r^2, 0)`: the part a model could still explain.
+//! `rms_v` is the residual RMS with the noise floor (or that noise, where it set the bar)
+//! taken out in quadrature, the root of the mean over records of `max(MSE_r - floor_r^2, 0)`:
+//! the part a model could still explain.
 
 use super::cycle_noise::cycle_noise_v;
 use super::data::{Data, min_max};
