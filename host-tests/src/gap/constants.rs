@@ -268,15 +268,23 @@ pub const CREEP_START_MIN_FLOORS: f64 = 5.0;
 /// 10 kHz, sec. 2.4). Slower noise is not told from a slow effect.
 pub const NOISE_DECORRELATE_MAX_S: f64 = 8e-3;
 
-/// Whole cycles of a periodic input a record must hold for the noise that does not repeat
-/// with it to be read ([`super::cycle_noise`]; our assumption: the median of the cycles'
-/// mean squares needs several cycles beside a start transient, and the cycles' mean holds
-/// `1 / C` of the noise; a 10 s record of a 1 Hz sine holds 9 from its first rising crossing).
-pub const CYCLE_NOISE_MIN_CYCLES: usize = 8;
+/// Whole cycles of a periodic input a record must hold, after the high-pass's period, for the
+/// noise that does not repeat with it to be read ([`super::cycle_noise`]; our assumption: the
+/// median of the cycles' mean squares needs several cycles beside a start transient, and the
+/// cycles' mean holds about `1 / C` of the noise; a 10 s record of a 1 Hz sine holds 8, of a
+/// 0.8 Hz sine 6).
+pub const CYCLE_NOISE_MIN_CYCLES: usize = 6;
+/// The share of the noise read between a periodic input's cycles that sets a record's bar
+/// ([`super::cycle_noise`], RMS; our assumption: the estimate read 1-15 % above the noise's
+/// expected part on three seeds of red noise, a few cycles' medians of a noise correlated over
+/// a fifth of a cycle, and the growth of an effect taken out is judged over what is left above
+/// the bar, which an estimate too high would inflate).
+pub const CYCLE_NOISE_TRUST: f64 = 0.9;
 /// How far above the median of its neighbours a bin of the spectrum of a residual's part that
 /// does not repeat with a periodic input is held before that part is read as noise
-/// ([`super::cycle_noise`]; our assumption: a Welch average over eight or more segments puts
-/// a noise bin above 5x its neighbours' median about once in 10^4, a line tens of times).
+/// ([`super::cycle_noise`]; our assumption: a Welch average over the five or more segments of
+/// two periods the cycles give puts a noise bin above 5x its neighbours' median rarely (the
+/// red-noise and white-noise tests: not once), a line tens of times).
 pub const CYCLE_NOISE_LINE_RATIO: f64 = 5.0;
 /// How far the lengths of a periodic input's cycles may spread, as a share of its period
 /// ([`super::cycle_noise`]; our assumption: a generator's period is exact, and a measured

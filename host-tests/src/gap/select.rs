@@ -19,7 +19,7 @@ use super::constants::{
     REVERSED_CORRELATION, REVERSED_MIN_FLOORS, RISE_CHOICE_RATIO, SCALE_APART_MAX,
     STATIC_TELL_RATIO, STOP_FLOOR_RATIO, STRUCTURE_ROUNDS,
 };
-use super::cycle_noise::cycle_noise_v;
+use super::cycle_noise::cycle_bar_v;
 use super::data::{
     Data, LineFit, NoiseFloor, log_mse_term, min_max, mse, noise_floor_of, sim, simulate_all,
     swapped_columns, without_glitches,
@@ -1396,19 +1396,26 @@ fn diagnose_split(
     }
     // From here on a record with a periodic input is judged against the noise its residual
     // holds between the input's cycles where that exceeds its floor (`cycle_noise`: a
-    // sensor's low-frequency noise, which the floor read from the fast part does not count):
-    // against the floor alone, such noise compresses a true effect's growth below its bar (the
-    // thesis stage's 0.5 Hz triangle with 4.5 mV of red noise: `nonlinear-gain` took 8.15 mV
-    // to 5.38 mV, 1.63x above the 2.56 mV floor against its 1.75x bar, 3.2x above the 4.99 mV
-    // between cycles).
-    let var: Vec<f64> = data
+    // sensor's low-frequency noise, which the floor read from the fast part does not count),
+    // read once on the residual of the fullest model: against the floor alone, such noise
+    // compresses a true effect's growth below its bar (the thesis stage's 0.5 Hz triangle
+    // with 4.5 mV of red noise: `nonlinear-gain` took 8.15 mV to 5.38 mV, 1.63x above the
+    // 2.56 mV floor against its 1.75x bar, 2.3x above the bar of 4.49 mV between cycles).
+    // The rule that keeps an effect adding PRUNE_KEEP_EXCESS_VAR noise variances, and the
+    // polish (which can only lower the residual), keep the floors (`floor_var`).
+    let floor_var = var.clone();
+    let cycle_bar: Vec<Option<f64>> = data
         .iter()
         .zip(&sims)
-        .zip(&var)
-        .map(|((d, s), &v)| {
+        .map(|(d, s)| {
             let r: Vec<f64> = d.y_v.iter().zip(s).map(|(y, m)| y - m).collect();
-            cycle_noise_v(d, &r).map_or(v, |c| v.max(c * c))
+            cycle_bar_v(d, &r)
         })
+        .collect();
+    let var: Vec<f64> = var
+        .iter()
+        .zip(&cycle_bar)
+        .map(|(&v, c)| c.map_or(v, |c| v.max(c * c)))
         .collect();
     // Final check: take each named effect back out (refitting the slow ones left) and keep it
     // only if the residual above the noise floor grows by PRUNE_RATIO at least.
@@ -1505,7 +1512,8 @@ fn diagnose_split(
                 // (far from the floor, ratios are compressed).
                 let g = growth(&ms);
                 let large = g >= PRUNE_RATIO
-                    && (0..ms.len()).any(|i| ms[i] - cur_mse[i] > PRUNE_KEEP_EXCESS_VAR * var[i]);
+                    && (0..ms.len())
+                        .any(|i| ms[i] - cur_mse[i] > PRUNE_KEEP_EXCESS_VAR * floor_var[i]);
                 let ratio = if line_back || creep_shown || large {
                     f64::INFINITY
                 } else {
@@ -1614,7 +1622,7 @@ fn diagnose_split(
     // and the structure search's full rounds (a fast effect named after them, a slew limit,
     // moves the fast record their fit shares, and the steps' candidates search one round),
     // kept where no record's residual grows and their sum falls.
-    if !at_floor_now(&cur_mse, &var) {
+    if !at_floor_now(&cur_mse, &floor_var) {
         // (the set `refit_slow` refits)
         let slow = present_slow(&model);
         if !slow.is_empty()
@@ -1993,7 +2001,7 @@ fn diagnose_split(
             ),
         });
     }
-    let (unexplained, cycle_notes) = locate(data, &sims, &noise);
+    let (unexplained, cycle_notes) = locate(data, &sims, &noise, &cycle_bar);
     let final_rms_v = (cur_mse.iter().sum::<f64>() / cur_mse.len() as f64).sqrt();
     let mut noise_notes = setup.noise_notes.clone();
     noise_notes.extend(cycle_notes);

@@ -3,7 +3,7 @@
 //! explained is reported, with where it sits, in the table, the report and the JSON
 //! (`"unexplained": {"rms_v", "where"}`). Where the record's input repeats, the bar is set by
 //! the larger of the floor and the noise the residual holds between the input's cycles
-//! ([`cycle_noise_v`]: a sensor's low-frequency noise, which the floor does not count).
+//! ([`cycle_bar_v`](super::cycle_noise::cycle_bar_v): a sensor's low-frequency noise, which the floor does not count).
 //!
 //! Where, per record above the bar, from the final residual alone (no assumption of holds,
 //! edges or a fast/slow pair):
@@ -22,7 +22,6 @@
 //! taken out in quadrature, the root of the mean over records of `max(MSE_r - floor_r^2, 0)`:
 //! the part a model could still explain.
 
-use super::cycle_noise::cycle_noise_v;
 use super::data::{Data, min_max};
 use super::signatures::averaged_spectrum;
 
@@ -41,27 +40,29 @@ pub struct Unexplained {
 }
 
 /// The unexplained residual of `y - sims`, if some record stays above the bar, and a note for
-/// each record whose bar was set by the noise its residual holds between a periodic input's
-/// cycles rather than by its floor `noise` ([`cycle_noise_v`], where that is the larger).
+/// each record whose bar was set by the noise between a periodic input's cycles (`cycle`, per
+/// record: [`cycle_bar_v`](super::cycle_noise::cycle_bar_v), read by the caller before its final check) rather than by its
+/// floor `noise`, where that is the larger.
 pub fn locate(
     data: &[Data],
     sims: &[Vec<f64>],
     noise: &[f64],
+    cycle: &[Option<f64>],
 ) -> (Option<Unexplained>, Vec<String>) {
     let mut parts = Vec::new();
     let mut notes = Vec::new();
     let mut excess = 0.0;
-    for ((d, y), &floor) in data.iter().zip(sims).zip(noise) {
+    for (((d, y), &floor), c) in data.iter().zip(sims).zip(noise).zip(cycle) {
         let r: Vec<f64> = d.y_v.iter().zip(y).map(|(a, b)| a - b).collect();
         let ms = r.iter().map(|e| e * e).sum::<f64>() / r.len().max(1) as f64;
-        // (judged only where the floor alone would leave the record unexplained)
-        let f = match cycle_noise_v(d, &r) {
+        // (said only where the floor alone would leave the record unexplained)
+        let f = match *c {
             Some(c) if c > floor && ms.sqrt() > UNEXPLAINED_FLOOR_RATIO * floor => {
                 notes.push(format!(
-                    "{}: its residual holds {:.2} mV of noise that does not repeat with the \
-                     input's cycles (above its fundamental), {:.2}x the floor read from its \
-                     fast part: noise at low frequencies, which no effect of a stage driven \
-                     so makes; the residual ({:.2} mV) is judged against it",
+                    "{}: its residual holds noise that does not repeat with the input's \
+                     cycles (above their fundamental), {:.2} mV counted ({:.2}x the floor read \
+                     from its fast part): noise at low frequencies, or a misfit that changes \
+                     from cycle to cycle; the residual ({:.2} mV) is judged against it",
                     d.name,
                     1e3 * c,
                     c / floor.max(1e-12),
@@ -304,7 +305,7 @@ mod tests {
             .map(|(v, &x)| v + 3e-3 * (2.0 * std::f64::consts::PI * line_hz * x + 0.3).sin())
             .collect();
         let d = Data::from_record("r.csv", Record::new(t, u, Some(y), None).unwrap()).unwrap();
-        locate(&[d], &[sim], &[1e-4]).0.unwrap().where_
+        locate(&[d], &[sim], &[1e-4], &[None]).0.unwrap().where_
     }
 
     /// The residual's strongest line is told as the records show it: on a mains frequency the
