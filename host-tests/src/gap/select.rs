@@ -2027,13 +2027,14 @@ fn diagnose_split(
 }
 
 /// The diagnosis kept of both splits', when the loop alone could not choose between them: the
-/// one that explains every record (within 2x its floor, or of the noise between a periodic
-/// input's cycles where that is larger: no `unexplained` part) where only one does, else the one that names fewer effects, and of two that name as many, the one that
-/// ends lower. The split is a choice the records did not make, so the residuals the two leave (at several
-/// times the floor, a loop of another form's misfit, not noise) are not evidence for the extra
-/// names one of them gives: a Bouc-Wen loop under the `Band` split left a misfit that an
-/// `offset` of 279 mV and a `sensor-gain` of 0.82 took, beside the true `nonlinear-gain` the
-/// `Span` split's diagnosis named alone. Which names the other gave is kept with the choice
+/// one that explains every record (within 2x its floor, or of the bar the noise between a
+/// periodic input's cycles sets where that is larger: no `unexplained` part) where only one
+/// does, else the one that names fewer effects, and of two that name as many, the one that
+/// ends lower. The split is a choice the records did not make, so the residuals the two leave
+/// (at several times the floor, a loop of another form's misfit, not noise) are not evidence
+/// for the extra names one of them gives: a Bouc-Wen loop under the `Band` split left a misfit
+/// that an `offset` of 279 mV and a `sensor-gain` of 0.82 took, beside the true
+/// `nonlinear-gain` the `Span` split's diagnosis named alone. Which names the other gave is kept with the choice
 /// ([`CentreChoice::by_diagnosis`]).
 fn fewer_names(var: &[f64], a: Diagnosis, b: Diagnosis) -> Diagnosis {
     let (fa, fb) = (a.final_noise_var(var), b.final_noise_var(var));
@@ -2042,8 +2043,8 @@ fn fewer_names(var: &[f64], a: Diagnosis, b: Diagnosis) -> Diagnosis {
     // ended at 1.53x the floor with drift, hysteresis and its curvature under the span split,
     // and at 6.7x with drift and hysteresis under the band split, which fewer names alone
     // kept; with 4.5 mV of red noise added (AR(1), 0.2 s) the first ended at 2.2x the floor
-    // read from the fast part, and only the noise between the input's cycles (4.2 mV,
-    // `cycle_noise`) told that it explains the record. (an infinite or NaN residual never
+    // read from the fast part, and only the bar the noise between the input's cycles sets
+    // (3.9 mV, `cycle_noise`) told that it explains the record. (an infinite or NaN residual never
     // wins a tie: `total_cmp` puts NaN last)
     let b_first = a
         .unexplained

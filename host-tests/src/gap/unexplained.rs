@@ -2,8 +2,9 @@
 //! above [`UNEXPLAINED_FLOOR_RATIO`] times its noise floor, the part no catalogued effect
 //! explained is reported, with where it sits, in the table, the report and the JSON
 //! (`"unexplained": {"rms_v", "where"}`). Where the record's input repeats, the bar is set by
-//! the larger of the floor and the noise the residual holds between the input's cycles
-//! ([`cycle_bar_v`](super::cycle_noise::cycle_bar_v): a sensor's low-frequency noise, which the floor does not count).
+//! the larger of the floor and the bar the noise the residual holds between the input's
+//! cycles sets ([`cycle_bar_v`](super::cycle_noise::cycle_bar_v): a sensor's low-frequency
+//! noise, which the floor does not count).
 //!
 //! Where, per record above the bar, from the final residual alone (no assumption of holds,
 //! edges or a fast/slow pair):
@@ -41,8 +42,8 @@ pub struct Unexplained {
 
 /// The unexplained residual of `y - sims`, if some record stays above the bar, and a note for
 /// each record whose bar was set by the noise between a periodic input's cycles (`cycle`, per
-/// record: [`cycle_bar_v`](super::cycle_noise::cycle_bar_v), read by the caller before its final check) rather than by its
-/// floor `noise`, where that is the larger.
+/// record: [`cycle_bar_v`](super::cycle_noise::cycle_bar_v), read by the caller before its
+/// final check) rather than by its floor `noise`, where that is the larger.
 pub fn locate(
     data: &[Data],
     sims: &[Vec<f64>],
