@@ -53,6 +53,7 @@ use super::constants::{
 };
 use super::data::{Data, min_max};
 use super::signatures::averaged_spectrum;
+use super::unexplained::LINE_BINS;
 use crate::util::median;
 
 /// Shortest period, samples, the method reads (our assumption: a phase bin per sample needs
@@ -62,7 +63,7 @@ const MIN_PERIOD_SAMPLES: f64 = 16.0;
 /// The input's period, samples, where it repeats ([Method](self) steps 1-2), and the samples
 /// `start..end` from its first rising crossing to its last (a rest before or after the cycles
 /// is left out).
-pub fn input_period(d: &Data) -> Option<(f64, usize, usize)> {
+fn input_period(d: &Data) -> Option<(f64, usize, usize)> {
     let u = &d.u_v;
     let (lo, hi) = min_max(u);
     let span = hi - lo;
@@ -162,16 +163,16 @@ pub fn cycle_noise_v(d: &Data, r: &[f64]) -> Option<f64> {
 const LOCAL_BINS: usize = 16;
 
 /// Bins either side a window needs in [`broadband_share`] for its median not to be a line's
-/// own (a Hann line spreads over two bins either side of its centre).
-const LINE_CORE_BINS: usize = 4;
+/// own: a Hann line spreads over [`LINE_BINS`] bins either side of its centre, so a window of
+/// `2 h + 1` bins has a majority of others where `h` exceeds twice that.
+const LINE_CORE_BINS: usize = 2 * LINE_BINS as usize + 1;
 
 /// The share of `x`'s power that is not in lines: its Welch spectrum (Hann segments of `seg`
 /// samples, half overlap) with each bin held to [`CYCLE_NOISE_LINE_RATIO`] times the median
 /// of the bins around it, over the spectrum as it is (lines within [`LINE_CORE_BINS`] of the
-/// spectrum's ends are not held: at twice the period a segment holds, below twice the input's
-/// fundamental). A line that does not repeat with the
-/// input's cycles (interference, a mode the input does not drive) is no noise: it is what
-/// [`super::unexplained`] describes.
+/// spectrum's ends are not held: at two periods a segment, below 2.5 times the input's
+/// fundamental). A line that does not repeat with the input's cycles (interference, a mode
+/// the input does not drive) is no noise: it is what [`super::unexplained`] describes.
 fn broadband_share(x: &[f64], seg: usize) -> f64 {
     let p: Vec<f64> = averaged_spectrum(x, 1.0, seg)
         .iter()
