@@ -627,3 +627,47 @@ fn stage_refuses_absurd_configurations() {
         assert!(Stage::new(&c).is_err(), "{c:?}");
     }
 }
+
+/// A stage at rest reads, before its first step, what its first step with the input held
+/// reads: the sensor's scale and offset included (before session 39 the reading at rest was
+/// the position itself, so the first sample of every simulation of a model with a sensor
+/// offset lacked it). Checked with and without the second mode, the ADC and a hysteresis
+/// table, at several inputs, to within one ADC code (the step quantises its reading).
+#[test]
+fn the_reading_at_rest_is_the_first_steps_reading() {
+    for (second_mode, adc, table) in [
+        (false, false, false),
+        (true, false, false),
+        (false, true, true),
+    ] {
+        let mut c = clean_full();
+        c.sensor.gain = 1.03;
+        c.sensor.offset_v = 0.012;
+        c.sensor.adc = adc;
+        if second_mode {
+            c.second_mode = Some(ModeConfig {
+                mode_hz: 4000.0,
+                damping: 0.05,
+            });
+        }
+        if table {
+            c.hysteresis = StageConfig::thesis_full().hysteresis;
+        }
+        let stage = Stage::new(&c).unwrap();
+        for u in [0.0f32, 2.5, 7.0] {
+            let mut s = stage.steady_state(u);
+            let at_rest = s.signals().measured_v as f64;
+            let first = stage.step(&mut s, u) as f64;
+            let tol = if adc { AdcCode::VOLT_PER_LSB as f64 } else { 1e-5 };
+            assert!(
+                (at_rest - first).abs() <= tol,
+                "mode {second_mode}, adc {adc}, table {table}, u {u} V: at rest {at_rest} V, \
+                 first step {first} V"
+            );
+            // (the offset is in it: a reading at 0 V is the offset, not 0)
+            if u == 0.0 && !table {
+                assert!((at_rest - 0.012).abs() <= tol, "{at_rest}");
+            }
+        }
+    }
+}

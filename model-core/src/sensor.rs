@@ -133,6 +133,19 @@ impl Sensor {
         }
     }
 
+    /// The monitor reading for `position_v` without noise: the reading of a stage at rest,
+    /// before its first sample ([`crate::stage::Stage::steady_state`]). Through the ADC's
+    /// codes where the sensor has one, as [`Self::measure`] reads.
+    #[inline]
+    pub fn reading_at_rest(&self, position_v: f32) -> f32 {
+        let y = self.gain * position_v + self.offset_v;
+        if self.adc {
+            AdcCode::from_volts(y).volts()
+        } else {
+            y
+        }
+    }
+
     /// The monitor reading for `position_v`. Draws one noise sample only when noise is on.
     #[inline]
     pub fn measure(&self, s: &mut SensorState, position_v: f32) -> f32 {

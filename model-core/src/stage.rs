@@ -503,6 +503,15 @@ impl Stage {
         let fast_v = self.fast(&mut hysteresis, ue);
         let drift_v = self.drift.as_ref().map_or(0.0, |d| d.output(&drift));
         let d = fast_v + drift_v;
+        let plant = self.plant.steady_state(d);
+        // The position and the reading at rest are those the first step would give with the
+        // input held (the play operators at rest add nothing). Before session 39 both were
+        // `d`: the first sample of every simulation lacked the sensor's scale and offset, so
+        // a model with a 12 mV offset read 12 mV off at `t = 0`.
+        let position_v = match &self.second_mode {
+            Some(_) => d,
+            None => self.plant.output(&plant),
+        };
         StageState {
             amplifier,
             hysteresis,
@@ -511,7 +520,7 @@ impl Stage {
                 .as_ref()
                 .map_or(PlayState::default(), |p| p.steady_state(ue)),
             drift,
-            plant: self.plant.steady_state(d),
+            plant,
             second_mode: match &self.second_mode {
                 Some(m) => m.steady_state(d),
                 None => TwoModes::idle(),
@@ -522,8 +531,8 @@ impl Stage {
                 amplifier_v: amplifier.output_v,
                 fast_v,
                 drift_v,
-                position_v: d,
-                measured_v: d,
+                position_v,
+                measured_v: self.sensor.reading_at_rest(position_v),
             },
         }
     }

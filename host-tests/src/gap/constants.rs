@@ -218,6 +218,12 @@ pub const OFFSET_SHOWN_MIN: f64 = 0.12;
 /// plant's static gain of 0.79 moves the sensor by 0.8 mV, under a noise floor of 1 mV or
 /// more; an input measured with more noise than that leaves no rest, and no evidence).
 pub const REST_ZERO_INPUT_V: f64 = 1e-3;
+/// Two simulations read the same where every sample is within this many noise floors of the
+/// other's (our assumption: a tenth of the noise adds 1 % to a residual's power, below what
+/// any rule here reads; moving a constant between the sensor's offset and the table's level
+/// changes the samples by the `f32` maths' rounding, about 1e-6 V, where no K'(u) scales the
+/// table, and by the constant times K'(u)'s change over the inputs where one does).
+pub const SAME_READING_FLOORS: f64 = 0.1;
 /// Shortest rest at 0 V that counts ([`REST_ZERO_INPUT_V`]), seconds (our assumption: twice
 /// the thesis' plant's settling of about 1 ms; an input that passes through 0 V, or a cut of
 /// a record from a moving stage, stays there for less).

@@ -16,8 +16,8 @@ use super::constants::{
     FOLLOW_MIN_CORRELATION, HELD_LOOP_OVER_TAIL, HOLD_MIN_S, HYST_LOOP_MIN_NOISE, MAX_STEPS,
     MIN_EXPLAINED, MSE_MIN_V2, OCCAM_SWAP_RATIO, PAIR_FLOOR_RATIO, PRUNE_KEEP_EXCESS_VAR,
     PRUNE_PER_PARAM, PRUNE_RATIO, REST_ZERO_INPUT_V, REST_ZERO_SHOWN_MIN, REST_ZERO_SIGMAS,
-    REVERSED_CORRELATION, REVERSED_MIN_FLOORS, RISE_CHOICE_RATIO, SCALE_APART_MAX,
-    STATIC_TELL_RATIO, STOP_FLOOR_RATIO, STRUCTURE_ROUNDS,
+    REVERSED_CORRELATION, REVERSED_MIN_FLOORS, RISE_CHOICE_RATIO, SAME_READING_FLOORS,
+    SCALE_APART_MAX, STATIC_TELL_RATIO, STOP_FLOOR_RATIO, STRUCTURE_ROUNDS,
 };
 use super::cycle_noise::cycle_bar_v;
 use super::data::{
@@ -452,6 +452,52 @@ fn creep_start(
         creep_v,
         pinned_v,
     })
+}
+
+/// Does no record read the sensor's zero: none starts at rest at 0 V input (the one reading
+/// nothing but an offset moves) and none goes down to the table's low end `table_low_v`
+/// (where every relay is off)? A sensor offset is then a constant that the table's relays the
+/// records never switch, and its start memory, hold too (steps 11 and 13, GAP.md).
+fn reads_no_zero(data: &[Data], table_low_v: f64) -> bool {
+    data.iter()
+        .all(|d| d.zero_rest_len().is_none() && min_max(&d.u_v).0 > table_low_v + REST_ZERO_INPUT_V)
+}
+
+/// `model` with its `[offset]` moved into the hysteresis table's own output level, and the
+/// table's shift (sensor volts before the sensor's scale): the reading moves by the sensor's
+/// scale times the plant's static gain per volt of the table's level (measured on the stage
+/// at the table's mid-range input, as [`ModelFile::settled_creep_reading_v`] reads the
+/// drift). Exact where no K'(u) scales the table ([`same_readings`] checks it).
+fn offset_into_table(model: &ModelFile) -> Option<(ModelFile, f64)> {
+    let offset_v = model.offset.as_ref()?.offset_v;
+    let [lo, hi] = model.hysteresis.as_ref()?.input_range_v;
+    let mut up = model.clone();
+    up.hysteresis.as_mut()?.offset_v += 1.0;
+    let u = (0.5 * (lo + hi)) as f32;
+    let gain = model.stage_config().ok()?.sensor.gain;
+    let per_v = gain
+        * (up.build_stage().ok()?.static_output(u) - model.build_stage().ok()?.static_output(u))
+            as f64;
+    if !per_v.is_finite() || per_v.abs() < 1e-6 {
+        return None;
+    }
+    let shift_v = offset_v / per_v;
+    let mut moved = model.clone();
+    moved.hysteresis.as_mut()?.offset_v += shift_v;
+    moved.offset = None;
+    Some((moved, shift_v))
+}
+
+/// Do two simulations read the same: every record's samples within
+/// [`SAME_READING_FLOORS`] of its noise floor (`noise`, standard deviation) of each other?
+fn same_readings(a: &[Vec<f64>], b: &[Vec<f64>], noise: &[f64]) -> bool {
+    a.len() == b.len()
+        && a.iter().zip(b).zip(noise).all(|((a, b), floor)| {
+            a.len() == b.len()
+                && a.iter()
+                    .zip(b)
+                    .all(|(x, y)| (x - y).abs() <= SAME_READING_FLOORS * floor)
+        })
 }
 
 /// The joint step of a creep and a loop ([`CREEP_AND_LOOP`]): offered where the model has
@@ -1958,6 +2004,57 @@ fn diagnose_split(
             why,
         });
     }
+    // Step 13: an offset named beside a table on records that read no sensor zero is a
+    // constant the table holds as well (its relays the records never switch, its start
+    // memory): the records cannot tell the two, and which one the fit used depends on the
+    // split (the band split's table has no constant of its own to take it; families case
+    // 1044, a Preisach plane with no sensor offset on a chirp, named a false 71 mV offset). The
+    // constant moves into the table's own output level (`[hysteresis] offset_v`, the same
+    // readings), the offset is no longer named, and the pair is reported as one the records
+    // cannot tell, as the standing note below says where no offset was fitted.
+    if named.iter().any(|n| n == "hysteresis")
+        && named.iter().any(|n| n == "offset")
+        && let Some(h) = model.hysteresis.as_ref()
+        && reads_no_zero(data, h.input_range_v[0])
+        && let Some((moved, table_shift_v)) = offset_into_table(&model)
+        && let Ok((moved_sims, moved_mse)) = simulate_all(&moved, data)
+        && same_readings(&moved_sims, &sims, &noise)
+    {
+        let offset_v = model.offset.as_ref().map_or(0.0, |o| o.offset_v);
+        let why = format!(
+            "{STANDING_OFFSET_NOTE}: the offset fitted at {:.1} mV beside the table is a \
+             constant that the table's relays these records never switch, and its start \
+             memory, hold as well; kept as the table's own level ([hysteresis] offset_v moved \
+             by {:.1} mV, the same readings); a rest at 0 V at a record's start (the \
+             recommended protocol), or records that go down to the bottom of the range, tell \
+             a sensor offset from it",
+            1e3 * offset_v,
+            1e3 * table_shift_v
+        );
+        steps.push(Step {
+            removed: true,
+            ..Step::new(
+                "offset".into(),
+                why.clone(),
+                &cur_mse,
+                &moved_mse,
+                moved_sims.clone(),
+            )
+        });
+        cannot_tell.push(CannotTell {
+            named: "hysteresis".into(),
+            alternative: "offset".into(),
+            neither_named: false,
+            taken_out_unshown: false,
+            rms_v: rms_of(&moved_mse),
+            alternative_rms_v: rms_of(&cur_mse),
+            why,
+        });
+        named.retain(|n| n != "offset");
+        model = moved;
+        sims = moved_sims;
+        cur_mse = moved_mse;
+    }
     // Never silent on an offset the records cannot see: with a table named, no offset named
     // or reported, no record that starts at rest at 0 V (the reading that is the sensor's
     // zero, above) and none that goes down to the table's low end (where every relay is off
@@ -1972,10 +2069,7 @@ fn diagnose_split(
         && !cannot_tell
             .iter()
             .any(|k| k.alternative == "offset" || k.named == "offset")
-        && data.iter().all(|d| d.zero_rest_len().is_none())
-        && data
-            .iter()
-            .all(|d| min_max(&d.u_v).0 > table_low_v + REST_ZERO_INPUT_V)
+        && reads_no_zero(data, table_low_v)
         && let Some(with) = refit_slow(&model, &["offset"], data, &slow_x, u_range)
         && let Ok((_, mse_with)) = simulate_all(&with, data)
         && leave_within(&mse_with, &cur_mse, &var, CANNOT_TELL_RATIO)
@@ -2474,6 +2568,66 @@ fn candidates(
 mod tests {
     use super::*;
     use crate::io::csv::Record;
+
+    /// Step 13's move: an offset beside a table goes into the table's own level with the
+    /// same readings (every sample within the `f32` rounding) where no K'(u) scales the table,
+    /// and reads differently (refused by [`same_readings`]) where the thesis' K'(u) does; a
+    /// record reads the sensor's zero ([`reads_no_zero`] false) where it starts at rest at 0 V
+    /// or goes down to the table's low end.
+    #[test]
+    fn an_offset_beside_a_table_moves_into_its_level() {
+        let rate = 5e3;
+        // 0.5 s of a 4 Hz sine between `lo` and 9 V, after `rest_s` at 0 V.
+        let record = |lo: f64, rest_s: f64| {
+            let n = ((0.5 + rest_s) * rate) as usize;
+            let t: Vec<f64> = (0..n).map(|i| i as f64 / rate).collect();
+            let u: Vec<f64> = t
+                .iter()
+                .map(|&t| {
+                    if t < rest_s {
+                        0.0
+                    } else {
+                        let x = (2.0 * std::f64::consts::PI * 4.0 * (t - rest_s)).cos();
+                        lo + 0.5 * (9.0 - lo) * (1.0 - x)
+                    }
+                })
+                .collect();
+            Data::from_record("sine.csv", Record::new(t, u.clone(), Some(u), None).unwrap())
+                .unwrap()
+        };
+        let sine = [record(1.0, 0.0)];
+        let noise = [1e-3];
+        let mut model = ModelFile::built_in("thesis-full").unwrap();
+        model.converters.adc = false;
+        model.offset = Some(crate::io::model_file::OffsetSection { offset_v: 0.03 });
+        let table_lo = model.hysteresis.as_ref().unwrap().input_range_v[0];
+        let sims = |m: &ModelFile| -> Vec<Vec<f64>> {
+            sine.iter().map(|d| sim(m, d).unwrap()).collect()
+        };
+        // With the thesis' K'(u) (its gain changes over 1..9 V) the readings move.
+        let (moved, _) = offset_into_table(&model).unwrap();
+        assert!(moved.offset.is_none());
+        assert!(!same_readings(&sims(&moved), &sims(&model), &noise));
+        // Without it, the same readings to the f32 rounding (and the first sample too).
+        model.nonlinear_gain = None;
+        let (moved, shift_v) = offset_into_table(&model).unwrap();
+        let (a, b) = (sims(&moved), sims(&model));
+        let worst = a[0]
+            .iter()
+            .zip(&b[0])
+            .map(|(x, y)| (x - y).abs())
+            .fold(0.0, f64::max);
+        assert!(worst < 1e-5, "{worst}");
+        assert!(same_readings(&a, &b, &noise));
+        // The table's level moved by the offset over the sensor's scale and the plant's gain.
+        let per_v = model.stage_config().unwrap().sensor.gain;
+        assert!((shift_v * per_v - 0.03).abs() < 0.03 * 0.05, "{shift_v}");
+        // Which records read the sensor's zero.
+        assert!(reads_no_zero(&sine, table_lo));
+        assert!(!reads_no_zero(&[record(table_lo, 0.0)], table_lo));
+        assert!(!reads_no_zero(&[record(1.0, 0.1)], table_lo));
+        assert!(!reads_no_zero(&[sine[0].clone(), record(1.0, 0.1)], table_lo));
+    }
 
     /// Step 12 reads an offset as the drift's start only where it is the settled creep at
     /// every record's first input taken back (within a tenth; of the span from the pinned
