@@ -658,7 +658,11 @@ fn the_reading_at_rest_is_the_first_steps_reading() {
             let mut s = stage.steady_state(u);
             let at_rest = s.signals().measured_v as f64;
             let first = stage.step(&mut s, u) as f64;
-            let tol = if adc { AdcCode::VOLT_PER_LSB as f64 } else { 1e-5 };
+            let tol = if adc {
+                AdcCode::VOLT_PER_LSB as f64
+            } else {
+                1e-5
+            };
             assert!(
                 (at_rest - first).abs() <= tol,
                 "mode {second_mode}, adc {adc}, table {table}, u {u} V: at rest {at_rest} V, \

@@ -2592,8 +2592,11 @@ mod tests {
                     }
                 })
                 .collect();
-            Data::from_record("sine.csv", Record::new(t, u.clone(), Some(u), None).unwrap())
-                .unwrap()
+            Data::from_record(
+                "sine.csv",
+                Record::new(t, u.clone(), Some(u), None).unwrap(),
+            )
+            .unwrap()
         };
         let sine = [record(1.0, 0.0)];
         let noise = [1e-3];
@@ -2601,9 +2604,8 @@ mod tests {
         model.converters.adc = false;
         model.offset = Some(crate::io::model_file::OffsetSection { offset_v: 0.03 });
         let table_lo = model.hysteresis.as_ref().unwrap().input_range_v[0];
-        let sims = |m: &ModelFile| -> Vec<Vec<f64>> {
-            sine.iter().map(|d| sim(m, d).unwrap()).collect()
-        };
+        let sims =
+            |m: &ModelFile| -> Vec<Vec<f64>> { sine.iter().map(|d| sim(m, d).unwrap()).collect() };
         // With the thesis' K'(u) (its gain changes over 1..9 V) the readings move.
         let (moved, _) = offset_into_table(&model).unwrap();
         assert!(moved.offset.is_none());
@@ -2626,7 +2628,10 @@ mod tests {
         assert!(reads_no_zero(&sine, table_lo));
         assert!(!reads_no_zero(&[record(table_lo, 0.0)], table_lo));
         assert!(!reads_no_zero(&[record(1.0, 0.1)], table_lo));
-        assert!(!reads_no_zero(&[sine[0].clone(), record(1.0, 0.1)], table_lo));
+        assert!(!reads_no_zero(
+            &[sine[0].clone(), record(1.0, 0.1)],
+            table_lo
+        ));
     }
 
     /// Step 12 reads an offset as the drift's start only where it is the settled creep at
