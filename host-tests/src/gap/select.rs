@@ -454,6 +454,31 @@ fn creep_start(
     })
 }
 
+/// Say that an offset the records cannot tell from `holder`'s own constant was moved into it
+/// (steps 12 and 13): a step `offset (removed)` from the mean squares `before` to `after`
+/// (the same readings) and a `"cannot_tell"` pair, both giving `why`.
+fn offset_moved(
+    (steps, cannot_tell): (&mut Vec<Step>, &mut Vec<CannotTell>),
+    holder: &str,
+    why: String,
+    (before, after): (&[f64], &[f64]),
+    sims: &[Vec<f64>],
+) {
+    steps.push(Step {
+        removed: true,
+        ..Step::new("offset".into(), why.clone(), before, after, sims.to_vec())
+    });
+    cannot_tell.push(CannotTell {
+        named: holder.into(),
+        alternative: "offset".into(),
+        neither_named: false,
+        taken_out_unshown: false,
+        rms_v: rms_of(after),
+        alternative_rms_v: rms_of(before),
+        why,
+    });
+}
+
 /// Does no record read the sensor's zero: none starts at rest at 0 V input (the one reading
 /// nothing but an offset moves) and none goes down to the table's low end `table_low_v`
 /// (where every relay is off)? A sensor offset is then a constant that the table's relays the
@@ -1984,25 +2009,13 @@ fn diagnose_split(
             c.first_input_v,
             100.0 * CREEP_START_SHARE
         );
-        steps.push(Step {
-            removed: true,
-            ..Step::new(
-                "offset".into(),
-                why.clone(),
-                &cur_mse,
-                &cur_mse,
-                sims.clone(),
-            )
-        });
-        cannot_tell.push(CannotTell {
-            named: "drift".into(),
-            alternative: "offset".into(),
-            neither_named: false,
-            taken_out_unshown: false,
-            rms_v: rms_of(&cur_mse),
-            alternative_rms_v: rms_of(&cur_mse),
+        offset_moved(
+            (&mut steps, &mut cannot_tell),
+            "drift",
             why,
-        });
+            (&cur_mse, &cur_mse),
+            &sims,
+        );
     }
     // Step 13: an offset named beside a table on records that read no sensor zero is a
     // constant the table holds as well (its relays the records never switch, its start
@@ -2031,25 +2044,13 @@ fn diagnose_split(
             1e3 * offset_v,
             1e3 * table_shift_v
         );
-        steps.push(Step {
-            removed: true,
-            ..Step::new(
-                "offset".into(),
-                why.clone(),
-                &cur_mse,
-                &moved_mse,
-                moved_sims.clone(),
-            )
-        });
-        cannot_tell.push(CannotTell {
-            named: "hysteresis".into(),
-            alternative: "offset".into(),
-            neither_named: false,
-            taken_out_unshown: false,
-            rms_v: rms_of(&moved_mse),
-            alternative_rms_v: rms_of(&cur_mse),
+        offset_moved(
+            (&mut steps, &mut cannot_tell),
+            "hysteresis",
             why,
-        });
+            (&cur_mse, &moved_mse),
+            &moved_sims,
+        );
         named.retain(|n| n != "offset");
         model = moved;
         sims = moved_sims;
