@@ -505,9 +505,10 @@ impl Stage {
         let d = fast_v + drift_v;
         let plant = self.plant.steady_state(d);
         // The position and the reading at rest are those the first step would give with the
-        // input held (the play operators at rest add nothing). Before session 39 both were
-        // `d`: the first sample of every simulation lacked the sensor's scale and offset, so
-        // a model with a 12 mV offset read 12 mV off at `t = 0`.
+        // input held (the play operators at rest add nothing; the plant and the two modes
+        // have unity static gain, so the position is `d`). Before session 39 the reading was
+        // `d` too: the first sample of every simulation lacked the sensor's scale, offset and
+        // ADC, so a model with a 12 mV offset read 12 mV off at `t = 0`.
         let position_v = match &self.second_mode {
             Some(_) => d,
             None => self.plant.output(&plant),

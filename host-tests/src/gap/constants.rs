@@ -222,7 +222,9 @@ pub const REST_ZERO_INPUT_V: f64 = 1e-3;
 /// other's (our assumption: a tenth of the noise adds 1 % to a residual's power, below what
 /// any rule here reads; moving a constant between the sensor's offset and the table's level
 /// changes the samples by the `f32` maths' rounding, about 1e-6 V, where no K'(u) scales the
-/// table, and by the constant times K'(u)'s change over the inputs where one does).
+/// table, and by the constant times K'(u)'s change over the inputs where one does; through
+/// the ADC a sample on a code's edge may move by one code, which `select::same_readings`
+/// allows on top).
 pub const SAME_READING_FLOORS: f64 = 0.1;
 /// Shortest rest at 0 V that counts ([`REST_ZERO_INPUT_V`]), seconds (our assumption: twice
 /// the thesis' plant's settling of about 1 ms; an input that passes through 0 V, or a cut of

@@ -489,10 +489,11 @@ fn reads_no_zero(data: &[Data], table_low_v: f64) -> bool {
 }
 
 /// `model` with its `[offset]` moved into the hysteresis table's own output level, and the
-/// table's shift (sensor volts before the sensor's scale): the reading moves by the sensor's
-/// scale times the plant's static gain per volt of the table's level (measured on the stage
-/// at the table's mid-range input, as [`ModelFile::settled_creep_reading_v`] reads the
-/// drift). Exact where no K'(u) scales the table ([`same_readings`] checks it).
+/// table's shift (volts of the table's output): the reading moves by the sensor's scale
+/// times K'(u) per volt of the table's level (the plant's static gain is 1: the 0.79 lives in
+/// the table), measured on the stage at the table's mid-range input, as
+/// [`ModelFile::settled_creep_reading_v`] reads the drift. Exact where no K'(u) scales the
+/// table ([`same_readings`] checks it).
 fn offset_into_table(model: &ModelFile) -> Option<(ModelFile, f64)> {
     let offset_v = model.offset.as_ref()?.offset_v;
     let [lo, hi] = model.hysteresis.as_ref()?.input_range_v;
@@ -514,15 +515,26 @@ fn offset_into_table(model: &ModelFile) -> Option<(ModelFile, f64)> {
 }
 
 /// Do two simulations read the same: every record's samples within
-/// [`SAME_READING_FLOORS`] of its noise floor (`noise`, standard deviation) of each other?
-fn same_readings(a: &[Vec<f64>], b: &[Vec<f64>], noise: &[f64]) -> bool {
+/// [`SAME_READING_FLOORS`] of its noise floor (`noise`, standard deviation) of each other,
+/// plus `code_v` (one ADC code where the model reads through the ADC: a change far below a
+/// code still moves a sample that sits on a code's edge to the next)?
+fn same_readings(a: &[Vec<f64>], b: &[Vec<f64>], noise: &[f64], code_v: f64) -> bool {
     a.len() == b.len()
         && a.iter().zip(b).zip(noise).all(|((a, b), floor)| {
             a.len() == b.len()
                 && a.iter()
                     .zip(b)
-                    .all(|(x, y)| (x - y).abs() <= SAME_READING_FLOORS * floor)
+                    .all(|(x, y)| (x - y).abs() <= SAME_READING_FLOORS * floor + code_v)
         })
+}
+
+/// One ADC code, volts, where `model` reads through the 16-bit ADC, else 0.
+fn adc_code_v(model: &ModelFile) -> f64 {
+    if model.converters.adc {
+        f64::from(model_core::AdcCode::VOLT_PER_LSB)
+    } else {
+        0.0
+    }
 }
 
 /// The joint step of a creep and a loop ([`CREEP_AND_LOOP`]): offered where the model has
@@ -2025,13 +2037,13 @@ fn diagnose_split(
     // constant moves into the table's own output level (`[hysteresis] offset_v`, the same
     // readings), the offset is no longer named, and the pair is reported as one the records
     // cannot tell, as the standing note below says where no offset was fitted.
+    let table_low_v = slow_x.range().0;
     if named.iter().any(|n| n == "hysteresis")
         && named.iter().any(|n| n == "offset")
-        && let Some(h) = model.hysteresis.as_ref()
-        && reads_no_zero(data, h.input_range_v[0])
+        && reads_no_zero(data, table_low_v)
         && let Some((moved, table_shift_v)) = offset_into_table(&model)
         && let Ok((moved_sims, moved_mse)) = simulate_all(&moved, data)
-        && same_readings(&moved_sims, &sims, &noise)
+        && same_readings(&moved_sims, &sims, &noise, adc_code_v(&model))
     {
         let offset_v = model.offset.as_ref().map_or(0.0, |o| o.offset_v);
         let why = format!(
@@ -2044,6 +2056,9 @@ fn diagnose_split(
             1e3 * offset_v,
             1e3 * table_shift_v
         );
+        // (a pair in which a shape gave way to the offset no longer stands: the offset is
+        // not named)
+        cannot_tell.retain(|k| k.named != "offset");
         offset_moved(
             (&mut steps, &mut cannot_tell),
             "hysteresis",
@@ -2063,7 +2078,6 @@ fn diagnose_split(
     // relays the records never switch, and its start memory, take up as well. Said where an
     // offset fitted beside the table leaves within CANNOT_TELL_RATIO of what the model leaves
     // (the records do not pin it).
-    let table_low_v = slow_x.range().0;
     if named.iter().any(|n| n == "hysteresis")
         && !named.iter().any(|n| n == "offset")
         && !catalogue::present(&model, "offset")
@@ -2603,6 +2617,7 @@ mod tests {
         let noise = [1e-3];
         let mut model = ModelFile::built_in("thesis-full").unwrap();
         model.converters.adc = false;
+        model.converters.sensor_gain = 1.05;
         model.offset = Some(crate::io::model_file::OffsetSection { offset_v: 0.03 });
         let table_lo = model.hysteresis.as_ref().unwrap().input_range_v[0];
         let sims =
@@ -2610,7 +2625,7 @@ mod tests {
         // With the thesis' K'(u) (its gain changes over 1..9 V) the readings move.
         let (moved, _) = offset_into_table(&model).unwrap();
         assert!(moved.offset.is_none());
-        assert!(!same_readings(&sims(&moved), &sims(&model), &noise));
+        assert!(!same_readings(&sims(&moved), &sims(&model), &noise, 0.0));
         // Without it, the same readings to the f32 rounding (and the first sample too).
         model.nonlinear_gain = None;
         let (moved, shift_v) = offset_into_table(&model).unwrap();
@@ -2621,14 +2636,22 @@ mod tests {
             .map(|(x, y)| (x - y).abs())
             .fold(0.0, f64::max);
         assert!(worst < 1e-5, "{worst}");
-        assert!(same_readings(&a, &b, &noise));
-        // The table's level moved by the offset over the sensor's scale and the plant's gain.
-        let per_v = model.stage_config().unwrap().sensor.gain;
-        assert!((shift_v * per_v - 0.03).abs() < 0.03 * 0.05, "{shift_v}");
+        assert!(same_readings(&a, &b, &noise, 0.0));
+        // The table's level moved by the offset over the sensor's scale (1.05).
+        assert!((shift_v * 1.05 - 0.03).abs() < 1e-5, "{shift_v}");
+        // Through the ADC the move reads the same within a code, not within a tenth of the
+        // floor alone.
+        model.converters.adc = true;
+        let (moved, _) = offset_into_table(&model).unwrap();
+        let (a, b) = (sims(&moved), sims(&model));
+        assert!(same_readings(&a, &b, &noise, adc_code_v(&model)));
         // Which records read the sensor's zero.
         assert!(reads_no_zero(&sine, table_lo));
         assert!(!reads_no_zero(&[record(table_lo, 0.0)], table_lo));
         assert!(!reads_no_zero(&[record(1.0, 0.1)], table_lo));
+        // (the rest alone, with the table's low end below the records' inputs)
+        assert!(reads_no_zero(&sine, -0.5));
+        assert!(!reads_no_zero(&[record(1.0, 0.1)], -0.5));
         assert!(!reads_no_zero(
             &[sine[0].clone(), record(1.0, 0.1)],
             table_lo
