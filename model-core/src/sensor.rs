@@ -138,12 +138,7 @@ impl Sensor {
     /// codes where the sensor has one, as [`Self::measure`] reads.
     #[inline]
     pub fn reading_at_rest(&self, position_v: f32) -> f32 {
-        let y = self.gain * position_v + self.offset_v;
-        if self.adc {
-            AdcCode::from_volts(y).volts()
-        } else {
-            y
-        }
+        self.converted(self.gain * position_v + self.offset_v)
     }
 
     /// The monitor reading for `position_v`. Draws one noise sample only when noise is on.
@@ -153,10 +148,16 @@ impl Sensor {
         if self.noise_v > 0.0 {
             y += self.noise_v * s.rng.standard_normal();
         }
+        self.converted(y)
+    }
+
+    /// `y_v` as the monitor gives it: through the ADC's codes where the sensor has one.
+    #[inline]
+    fn converted(&self, y_v: f32) -> f32 {
         if self.adc {
-            AdcCode::from_volts(y).volts()
+            AdcCode::from_volts(y_v).volts()
         } else {
-            y
+            y_v
         }
     }
 }

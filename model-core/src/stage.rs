@@ -503,16 +503,11 @@ impl Stage {
         let fast_v = self.fast(&mut hysteresis, ue);
         let drift_v = self.drift.as_ref().map_or(0.0, |d| d.output(&drift));
         let d = fast_v + drift_v;
-        let plant = self.plant.steady_state(d);
         // The position and the reading at rest are those the first step would give with the
-        // input held (the play operators at rest add nothing; the plant and the two modes
-        // have unity static gain, so the position is `d`). Before session 39 the reading was
-        // `d` too: the first sample of every simulation lacked the sensor's scale, offset and
-        // ADC, so a model with a 12 mV offset read 12 mV off at `t = 0`.
-        let position_v = match &self.second_mode {
-            Some(_) => d,
-            None => self.plant.output(&plant),
-        };
+        // input held: the play operators at rest add nothing and the plant and the two modes
+        // have unity static gain, so the position is `d`, read through the sensor. Before
+        // session 39 the reading was `d` too: the first sample of every simulation lacked the
+        // sensor's scale, offset and ADC (a model with a 12 mV offset read 12 mV off at t = 0).
         StageState {
             amplifier,
             hysteresis,
@@ -521,7 +516,7 @@ impl Stage {
                 .as_ref()
                 .map_or(PlayState::default(), |p| p.steady_state(ue)),
             drift,
-            plant,
+            plant: self.plant.steady_state(d),
             second_mode: match &self.second_mode {
                 Some(m) => m.steady_state(d),
                 None => TwoModes::idle(),
@@ -532,8 +527,8 @@ impl Stage {
                 amplifier_v: amplifier.output_v,
                 fast_v,
                 drift_v,
-                position_v,
-                measured_v: self.sensor.reading_at_rest(position_v),
+                position_v: d,
+                measured_v: self.sensor.reading_at_rest(d),
             },
         }
     }

@@ -491,19 +491,17 @@ fn reads_no_zero(data: &[Data], table_low_v: f64) -> bool {
 /// `model` with its `[offset]` moved into the hysteresis table's own output level, and the
 /// table's shift (volts of the table's output): the reading moves by the sensor's scale
 /// times K'(u) per volt of the table's level (the plant's static gain is 1: the 0.79 lives in
-/// the table), measured on the stage at the table's mid-range input, as
-/// [`ModelFile::settled_creep_reading_v`] reads the drift. Exact where no K'(u) scales the
+/// the table), measured on the stage at the table's mid-range input
+/// ([`ModelFile::static_reading_v`], as [`ModelFile::settled_creep_reading_v`] reads the
+/// drift). Exact where no K'(u) scales the
 /// table ([`same_readings`] checks it).
 fn offset_into_table(model: &ModelFile) -> Option<(ModelFile, f64)> {
     let offset_v = model.offset.as_ref()?.offset_v;
     let [lo, hi] = model.hysteresis.as_ref()?.input_range_v;
     let mut up = model.clone();
     up.hysteresis.as_mut()?.offset_v += 1.0;
-    let u = (0.5 * (lo + hi)) as f32;
-    let gain = model.stage_config().ok()?.sensor.gain;
-    let per_v = gain
-        * (up.build_stage().ok()?.static_output(u) - model.build_stage().ok()?.static_output(u))
-            as f64;
+    let u = 0.5 * (lo + hi);
+    let per_v = up.static_reading_v(u).ok()? - model.static_reading_v(u).ok()?;
     if !per_v.is_finite() || per_v.abs() < 1e-6 {
         return None;
     }
@@ -692,6 +690,11 @@ fn fit_slow_set(
 /// notes a step's evidence gives by these words).
 pub const STANDING_OFFSET_NOTE: &str =
     "no record starts at rest at 0 V input or goes down to the bottom of the table's range";
+
+/// The closing words of the notes on an offset the records cannot tell from the table's
+/// constant (the standing note and step 13): what records would tell them.
+const ZERO_READING_TELLS: &str = "a rest at 0 V at a record's start (the recommended \
+     protocol), or records that go down to the bottom of the range, tell a sensor offset from it";
 
 /// The static shapes of the sensor and the gain: a scale, an offset and a curvature of the
 /// output, which one sine or chirp beside a hysteresis loop can leave nearly collinear.
@@ -2050,9 +2053,7 @@ fn diagnose_split(
             "{STANDING_OFFSET_NOTE}: the offset fitted at {:.1} mV beside the table is a \
              constant that the table's relays these records never switch, and its start \
              memory, hold as well; kept as the table's own level ([hysteresis] offset_v moved \
-             by {:.1} mV, the same readings); a rest at 0 V at a record's start (the \
-             recommended protocol), or records that go down to the bottom of the range, tell \
-             a sensor offset from it",
+             by {:.1} mV, the same readings); {ZERO_READING_TELLS}",
             1e3 * offset_v,
             1e3 * table_shift_v
         );
@@ -2101,9 +2102,7 @@ fn diagnose_split(
                 "{STANDING_OFFSET_NOTE}: a sensor offset is a constant that the table's relays \
                  these records never switch, and its start memory, hold too, and the records \
                  do not pin it (an offset fitted beside the table comes to {:.1} mV and leaves \
-                 {:.2} mV against {:.2} mV); a rest at 0 V at a record's start (the recommended \
-                 protocol), or records that go down to the bottom of the range, tell a sensor \
-                 offset from it",
+                 {:.2} mV against {:.2} mV); {ZERO_READING_TELLS}",
                 1e3 * fitted_v,
                 1e3 * rms_of(&mse_with),
                 1e3 * rms_of(&cur_mse)

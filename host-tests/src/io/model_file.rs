@@ -686,12 +686,16 @@ impl ModelFile {
         }
         let mut without = self.clone();
         without.drift = None;
-        // The sensor's scale as the stage applies it ([converters] times [sensor-gain]).
+        Ok(self.static_reading_v(u_v)? - without.static_reading_v(u_v)?)
+    }
+
+    /// The reading at rest with `u_v` held for ever, less the sensor's offset, sensor volts:
+    /// the stage's static output ([`Stage::static_output`]) through the sensor's scale as the
+    /// stage applies it (`[converters]` times `[sensor-gain]`), without the ADC's codes (the
+    /// differences of two such readings are what the callers compare).
+    pub fn static_reading_v(&self, u_v: f64) -> anyhow::Result<f64> {
         let gain = self.stage_config()?.sensor.gain;
-        let u = u_v as f32;
-        Ok(gain
-            * (self.build_stage()?.static_output(u) - without.build_stage()?.static_output(u))
-                as f64)
+        Ok(gain * self.build_stage()?.static_output(u_v as f32) as f64)
     }
 
     /// The model-core stage, or an error naming the refused table.
