@@ -30,6 +30,7 @@
 mod families;
 
 use families::{Creep, Family, HystForm, Hysteresis, Protocol, StaticMap, draw_protocol, lu};
+use host_tests::gap::shrink::{CUT_MIN, FLOOR_MAX, ResidualCut};
 use host_tests::gap::{self, Data, Options, diagnose};
 use host_tests::io::csv::Record;
 use host_tests::io::model_file::{
@@ -274,8 +275,23 @@ struct Outcome {
     /// standing note on the offset (`gap::STANDING_OFFSET_NOTE`).
     reported: Vec<String>,
     final_over_floor: f64,
+    /// Each correctly named effect and what its kept steps did to the residual
+    /// (`gap::Diagnosis::residual_cuts`: the issue's requirement, as the hidden-effect suite
+    /// measures it).
+    cuts: Vec<(String, Vec<ResidualCut>)>,
     describe: String,
     seconds: f64,
+}
+
+impl Outcome {
+    /// The correctly named effects whose steps all meet the issue's residual cut, and how
+    /// the first that does not fell short.
+    fn cut_failures(&self) -> Vec<String> {
+        self.cuts
+            .iter()
+            .filter_map(|(e, cs)| cs.iter().find(|c| !c.meets()).map(|c| format!("{e}: {c}")))
+            .collect()
+    }
 }
 
 fn run_case(seed: u64) -> Outcome {
@@ -303,6 +319,11 @@ fn run_case(seed: u64) -> Outcome {
     }
     let mut named = d.named.clone();
     named.sort();
+    let cuts = named
+        .iter()
+        .filter(|n| case.effects.contains(&n.as_str()))
+        .map(|n| (n.clone(), d.residual_cuts(n, &data, &base)))
+        .collect();
     // (not the standing note on the offset: it is given on a protocol's account, whatever
     // the records show)
     let reported = d
@@ -318,6 +339,7 @@ fn run_case(seed: u64) -> Outcome {
         named,
         reported,
         final_over_floor: d.final_rms_v / d.noise_floor_v,
+        cuts,
         describe: case.describe(),
         seconds: started.elapsed().as_secs_f64(),
     }
@@ -336,6 +358,9 @@ struct Tally {
     /// Cases exact, or with no false name and every missed effect in a pair the diagnosis
     /// reports the records cannot tell ([`Outcome::said`]).
     said: usize,
+    /// Correctly named effects, and those whose steps meet the issue's residual cut.
+    right_names: usize,
+    cut_met: usize,
     seconds: f64,
 }
 
@@ -360,6 +385,8 @@ impl Tally {
         self.seconds += o.seconds;
         self.exact += (o.truth == o.named) as usize;
         self.said += o.said() as usize;
+        self.right_names += o.cuts.len();
+        self.cut_met += o.cuts.len() - o.cut_failures().len();
         self.names_given += o.named.len();
         self.false_names += o.named.iter().filter(|n| !o.truth.contains(n)).count();
         self.missed += o.truth.iter().filter(|t| !o.named.contains(t)).count();
@@ -375,6 +402,10 @@ impl Tally {
 
     fn false_pct(&self) -> f64 {
         100.0 * self.false_names as f64 / self.names_given.max(1) as f64
+    }
+
+    fn cut_pct(&self) -> f64 {
+        100.0 * self.cut_met as f64 / self.right_names.max(1) as f64
     }
 
     fn line(&self, label: &str) -> String {
@@ -428,6 +459,12 @@ fn run_suite() -> Option<Tally> {
         by_family.entry(o.family).or_default().add(o);
         for f in &o.forms {
             by_form.entry(f).or_default().add(o);
+        }
+        for f in o.cut_failures() {
+            println!(
+                "CUT seed {seed} {f} (final {:.2}x floor) {}",
+                o.final_over_floor, o.describe
+            );
         }
         if o.truth != o.named {
             println!(
@@ -514,13 +551,23 @@ fn run_suite() -> Option<Tally> {
         all.cases,
         100.0 * all.said as f64 / all.cases.max(1) as f64
     );
+    println!(
+        "correctly named effects meeting the residual cut (>= {CUT_MIN}x, or to <= {FLOOR_MAX}x the floor): {}/{} = {:.1} %",
+        all.cut_met,
+        all.right_names,
+        all.cut_pct()
+    );
     only.is_none().then_some(all)
 }
 
 /// What the workflow holds on the drawn cases today, as a guard against regressions (the
 /// test command runs it and prints the confusion table): no name on a clean record, and at
-/// least 80 % exact named sets with at most 4.6 % false names, in release with the default
-/// 100 cases (`GAP_CASES` unset). Measured in session 39 (an offset beside a table on records
+/// least 80 % exact named sets with at most 4.6 % false names, and at least 97 % of the
+/// correctly named effects meeting the issue's residual cut (`gap::shrink`), in release with
+/// the default 100 cases (`GAP_CASES` unset). The cut, first measured in session 40: 105 of
+/// 106 (99.1 %); the one short is case 1002, a Duhem loop whose branches run backwards (least
+/// slope -3.95), which no Everett table the stage accepts can follow (4.1x; the margin is two
+/// more such cases). Measured in session 39 (an offset beside a table on records
 /// that read no sensor zero kept as the table's level, `select.rs` step 13: 1044's false
 /// offset gone): 83.0 % exact, 3 false names of 109 (2.8 %), 0 of 15 clean cases named, 91
 /// exact or honest (1071's missed offset is now only in the standing note, which the tally
@@ -544,17 +591,17 @@ fn run_suite() -> Option<Tally> {
 fn randomised_families_hold_their_measured_rates() {
     let full_run = std::env::var("GAP_CASES").is_err();
     suite_meets(
-        80.0,
-        4.6,
+        [80.0, 4.6, 97.0],
         full_run,
-        "the measured 83 % and 2.8 % with their margins",
+        "the measured 83 %, 2.8 % and 99.1 % with their margins",
     );
 }
 
 /// Runs the suite ([`run_suite`]) and asserts no name on a clean record and, in release
-/// where `rates` (with 100 cases at least), at least `exact_pct` exact named sets and at most
-/// `false_pct` false names; `what` names the figures in the messages.
-fn suite_meets(exact_pct: f64, false_pct: f64, rates: bool, what: &str) {
+/// where `rates` (with 100 cases at least), at least `exact_pct` exact named sets, at most
+/// `false_pct` false names and at least `cut_pct` of the correctly named effects meeting the
+/// residual cut; `what` names the figures in the messages.
+fn suite_meets([exact_pct, false_pct, cut_pct]: [f64; 3], rates: bool, what: &str) {
     let Some(all) = run_suite() else {
         return;
     };
@@ -571,18 +618,23 @@ fn suite_meets(exact_pct: f64, false_pct: f64, rates: bool, what: &str) {
             "false names {:.1} % above {false_pct} % ({what})",
             all.false_pct()
         );
+        assert!(
+            all.cut_pct() >= cut_pct,
+            "residual cut met by {:.1} % below {cut_pct} % ({what})",
+            all.cut_pct()
+        );
     }
 }
 
 /// Issue #12's requirements on 100 drawn cases: >= 95 % exact named sets, <= 1 % false names
-/// (of the names given), no name on a clean record. Not met: 83.0 % exact and 2.8 % false
-/// names (see the test above and `host-tests/GAP.md`); most failures are a loop of another
+/// (of the names given), no name on a clean record, every correctly named effect meeting the
+/// residual cut. Not met: 83.0 % exact, 2.8 % false names and 99.1 % of the cuts (see the test above and `host-tests/GAP.md`); most failures are a loop of another
 /// form (Bouc-Wen, Duhem) on a sine or a chirp beside a static shape the records cannot tell
 /// from the table's misfit.
 #[test]
 #[ignore = "issue #12: workflow does not yet meet this on all families"]
 fn randomised_families_are_named() {
-    suite_meets(95.0, 1.0, true, "issue #12's figures");
+    suite_meets([95.0, 1.0, 100.0], true, "issue #12's figures");
 }
 
 /// What a real recording adds, on cases drawn as the suite draws them but from seeds it never

@@ -58,7 +58,8 @@
 //!   table's own response; [`start`]: the table's memory at the start of the records;
 //! * [`select`]: the greedy driver: candidates, scores, selection, the final check (steps 4-6);
 //! * [`report`]: the table and the HTML report of a [`Diagnosis`]; [`unexplained`]: what is
-//!   left above twice the floor and where (never silent);
+//!   left above twice the floor and where (never silent); [`shrink`]: how far each named
+//!   effect cut the residual (the measure, for the tests and readers);
 //! * [`protocol`]: the recording protocol whose records show every effect; [`demo`]: the
 //!   virtual stage of `piezo demo`.
 
@@ -75,6 +76,7 @@ pub mod nnls;
 pub mod protocol;
 pub mod report;
 pub mod select;
+pub mod shrink;
 pub mod signatures;
 pub mod slow_fit;
 pub mod start;
