@@ -167,6 +167,14 @@ pub const HYST_LOOP_MIN_NOISE: f64 = 3.0;
 /// a quadratic and the direction's term are four parameters (our assumption: one more than
 /// that, so the loop's estimate has a residual to be judged against).
 pub const HELD_LOOP_MIN_HOLDS: usize = 5;
+/// Distinct held levels from which the held levels' loop takes a quartic in the input for the
+/// static part in place of a quadratic ([`super::signatures`]; our assumption: three levels a
+/// parameter, the quadratic's own count kept below it). A static misfit of higher order than a
+/// quadratic (a gain curve of another shape than the catalogue's K'(u) leaves one) otherwise
+/// leaks into the direction's coefficient where the levels reached from below sit mostly at
+/// one end, as on random levels: families case 1046, a tanh gain curve 196 mV deep on 18
+/// levels, read a 27 mV loop from it and took a false `hysteresis` (session 40).
+pub const HELD_LOOP_QUARTIC_LEVELS: usize = 12;
 /// Shortest hold whose level counts towards that loop, seconds (our assumption: the thesis'
 /// plant settles in about 1 ms, and the hold's second half, from 10 ms on, is its level).
 pub const HELD_LOOP_MIN_S: f64 = 0.02;
