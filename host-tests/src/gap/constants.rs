@@ -164,12 +164,14 @@ pub const DRIFT_TAU_MAX_RECORDS: f64 = 2.0;
 /// loop, not noise; a sensor-gain error with 1 mV of noise shows 0.5 mV, a real loop hundreds).
 pub const HYST_LOOP_MIN_NOISE: f64 = 3.0;
 /// Holds a record of steps alone needs for its held levels' loop ([`super::signatures`]):
-/// a quadratic and the direction's term are four parameters (our assumption: one more than
+/// a quadratic and the direction's term are four parameters (the quartic, six, only from
+/// [`HELD_LOOP_QUARTIC_LEVELS`] distinct levels) (our assumption: one more than
 /// that, so the loop's estimate has a residual to be judged against).
 pub const HELD_LOOP_MIN_HOLDS: usize = 5;
 /// Distinct held levels from which the held levels' loop takes a quartic in the input for the
-/// static part in place of a quadratic ([`super::signatures`]; our assumption: three levels a
-/// parameter, the quadratic's own count kept below it). A static misfit of higher order than a
+/// static part in place of a quadratic ([`super::signatures`]; our assumption: two levels a
+/// parameter of the quartic and the direction's term, six, so the fit keeps as many degrees
+/// of freedom as it has parameters). A static misfit of higher order than a
 /// quadratic (a gain curve of another shape than the catalogue's K'(u) leaves one) otherwise
 /// leaks into the direction's coefficient where the levels reached from below sit mostly at
 /// one end, as on random levels: families case 1046, a tanh gain curve 196 mV deep on 18
@@ -178,7 +180,7 @@ pub const HELD_LOOP_QUARTIC_LEVELS: usize = 12;
 /// Shortest hold whose level counts towards that loop, seconds (our assumption: the thesis'
 /// plant settles in about 1 ms, and the hold's second half, from 10 ms on, is its level).
 pub const HELD_LOOP_MIN_S: f64 = 0.02;
-/// Share of the direction's power (each hold's +1 or -1) that the static quadratic must leave
+/// Share of the direction's power (each hold's +1 or -1) that the static polynomial must leave
 /// unexplained for the held levels' loop to be measured at all (our assumption: a quarter,
 /// the direction's residual at half its size; below, the levels' direction follows from their
 /// input and a loop cannot be told from a static shape).

@@ -45,6 +45,12 @@ impl ResidualCut {
     }
 }
 
+/// Does an effect whose kept steps did `cuts` meet the requirement? Every such step must, and
+/// an effect no kept step names does not (nothing shows its work).
+pub fn effect_meets(cuts: &[ResidualCut]) -> bool {
+    !cuts.is_empty() && cuts.iter().all(ResidualCut::meets)
+}
+
 impl std::fmt::Display for ResidualCut {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         write!(
@@ -58,7 +64,8 @@ impl std::fmt::Display for ResidualCut {
 impl Diagnosis {
     /// For each kept step that names `effect`, what it did to the residual of the records
     /// `data` (as diagnosed from `base`): empty where no kept step names it. A simulation
-    /// error of the model without the effect counts as no cut.
+    /// error of the model without the effect counts as no cut. The final model without the
+    /// effect is simulated at most once (it is the same for every step).
     pub fn residual_cuts(&self, effect: &str, data: &[Data], base: &ModelFile) -> Vec<ResidualCut> {
         let named_here = |s: &super::Step| {
             if s.refit {
@@ -66,6 +73,16 @@ impl Diagnosis {
             } else {
                 s.effect.split('+').any(|p| p == effect)
             }
+        };
+        let marginal = std::cell::OnceCell::new();
+        let without_ratio = || {
+            let without = catalogue::revert(&self.model, base, effect);
+            data.iter()
+                .zip(&self.record_final_rms_v)
+                .map(|(r, fin)| {
+                    sim(&without, r).map_or(0.0, |y| mse(&r.y_v, &y).sqrt() / fin.max(1e-12))
+                })
+                .fold(0.0f64, f64::max)
         };
         self.steps
             .iter()
@@ -86,14 +103,7 @@ impl Diagnosis {
                 let marginal = if step_cut >= CUT_MIN || near_floor {
                     f64::INFINITY
                 } else {
-                    let without = catalogue::revert(&self.model, base, effect);
-                    data.iter()
-                        .zip(&self.record_final_rms_v)
-                        .map(|(r, fin)| {
-                            sim(&without, r)
-                                .map_or(0.0, |y| mse(&r.y_v, &y).sqrt() / fin.max(1e-12))
-                        })
-                        .fold(0.0f64, f64::max)
+                    *marginal.get_or_init(without_ratio)
                 };
                 ResidualCut {
                     step_cut,

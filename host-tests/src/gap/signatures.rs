@@ -15,7 +15,8 @@
 //! * **loop** (slowly moving input): the largest gap between the residual on rising and on
 //!   falling input at the same input level: hysteresis; in a record of steps alone (random
 //!   levels, no input that moves slowly) the gap between held levels reached from below and
-//!   from above, a static quadratic taken out, which counts where the holds show no tail (a
+//!   from above, a static quadratic (a quartic on many levels) taken out, which counts where
+//!   the holds show no tail (a
 //!   creep that has not caught up leaves the same pattern) or the model already has a drift
 //!   (a creep and a loop together: the tails are the drift's; session 28);
 //! * **static curve** (settled samples): the curvature of the residual against the input:
@@ -55,7 +56,8 @@ pub struct Signatures {
     pub loop_v: f64,
     /// Largest gap between held levels reached from below and from above at equal input, in
     /// records of steps alone (no input that moves slowly), volts: the residual of each
-    /// hold's second half fitted to a static quadratic and the direction of the step into it.
+    /// hold's second half fitted to a static quadratic (a quartic on many levels) and the
+    /// direction of the step into it.
     pub held_loop_v: f64,
     /// Whether a record of steps alone holds enough levels for that loop, reached each way,
     /// but the direction of the step into each follows from its level (the levels reached
@@ -842,12 +844,13 @@ mod tests {
         assert_eq!(held_loop_v(&d, &r), HeldLoop::Untold, "0-5-10-0 cycle");
     }
 
-    /// On 18 random levels, a static misfit of higher order than a quadratic (a tanh step 30
-    /// mV deep and 1.5 V wide at 2.5 V, what the catalogue's K'(u) leaves of a sharper gain
+    /// On 18 random levels, a static misfit of higher order than a quadratic (a tanh step of
+    /// +-30 mV, 1.5 V wide at 2.5 V, what the catalogue's K'(u) leaves of a sharper gain
     /// curve) is no loop: the quartic the levels' count allows takes it to under 1 mV, where
     /// the quadratic read a gap of 3 mV or more from it (the hysteresis gate at a 1 mV floor);
     /// a true gap of 6 mV beside it is found within 1 mV. (Levels drawn once; offline, the
-    /// quadratic reads 5.5 mV here, the quartic 0.03 mV, and 5.97 mV of the true 6.)
+    /// quadratic reads 5.5 mV here, the quartic 0.03 mV, and 5.97 mV of the true 6.) Fourteen
+    /// levels each reached one way only give no answer on the quartic's path either.
     #[test]
     fn a_static_shape_of_higher_order_on_many_levels_is_no_loop() {
         let levels = [
@@ -872,5 +875,17 @@ mod tests {
         let (d, r) = steps_beside(&levels, 0.003, tanh);
         let g = gap(held_loop_v(&d, &r));
         assert!((g - 0.006).abs() < 1e-3, "gap {g} V against 6 mV");
+        // Fourteen levels, the high ones all reached from below and the low ones from above:
+        // the direction follows from the level, on the quartic's path as on the quadratic's.
+        let mut one_way = vec![5.0];
+        for k in 0..7 {
+            one_way.extend([6.0 + 0.5 * k as f64, 0.5 + 0.5 * k as f64]);
+        }
+        let (d, r) = steps_beside(&one_way, 0.003, tanh);
+        assert_eq!(
+            held_loop_v(&d, &r),
+            HeldLoop::Untold,
+            "levels reached one way"
+        );
     }
 }
