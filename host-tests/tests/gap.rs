@@ -217,13 +217,9 @@ fn run_case(kind: &[&str], seed: u64, slow_s: f64) -> Outcome {
     let mut cuts_ok = true;
     let mut worst_cut = String::new();
     for effect in tr.effects.iter().filter(|e| d.named.contains(e)) {
-        let cuts = d.residual_cuts(effect, &data, &base);
-        if !gap::shrink::effect_meets(&cuts) {
+        if let Some(s) = gap::shrink::shortfall(effect, &d.residual_cuts(effect, &data, &base)) {
             cuts_ok = false;
-            worst_cut = match cuts.iter().find(|c| !c.meets()) {
-                Some(c) => format!("{effect}: {c}"),
-                None => format!("{effect}: no kept step names it"),
-            };
+            worst_cut = s;
         }
     }
     Outcome {

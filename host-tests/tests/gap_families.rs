@@ -30,7 +30,7 @@
 mod families;
 
 use families::{Creep, Family, HystForm, Hysteresis, Protocol, StaticMap, draw_protocol, lu};
-use host_tests::gap::shrink::{CUT_MIN, FLOOR_MAX, ResidualCut, effect_meets};
+use host_tests::gap::shrink::{CUT_MIN, FLOOR_MAX, ResidualCut, shortfall};
 use host_tests::gap::{self, Data, Options, diagnose};
 use host_tests::io::csv::Record;
 use host_tests::io::model_file::{
@@ -289,11 +289,7 @@ impl Outcome {
     fn cut_failures(&self) -> Vec<String> {
         self.cuts
             .iter()
-            .filter(|(_, cs)| !effect_meets(cs))
-            .map(|(e, cs)| match cs.iter().find(|c| !c.meets()) {
-                Some(c) => format!("{e}: {c}"),
-                None => format!("{e}: no kept step names it"),
-            })
+            .filter_map(|(e, cs)| shortfall(e, cs))
             .collect()
     }
 }

@@ -164,15 +164,15 @@ pub const DRIFT_TAU_MAX_RECORDS: f64 = 2.0;
 /// loop, not noise; a sensor-gain error with 1 mV of noise shows 0.5 mV, a real loop hundreds).
 pub const HYST_LOOP_MIN_NOISE: f64 = 3.0;
 /// Holds a record of steps alone needs for its held levels' loop ([`super::signatures`]):
-/// a quadratic and the direction's term are four parameters (the quartic, six, only from
-/// [`HELD_LOOP_QUARTIC_LEVELS`] distinct levels) (our assumption: one more than
-/// that, so the loop's estimate has a residual to be judged against).
+/// a quadratic and the direction's term are four parameters (our assumption: one more than
+/// that, so the loop's estimate has a residual to be judged against; the quartic's six
+/// parameters come only with [`HELD_LOOP_QUARTIC_LEVELS`] distinct levels).
 pub const HELD_LOOP_MIN_HOLDS: usize = 5;
 /// Distinct held levels from which the held levels' loop takes a quartic in the input for the
 /// static part in place of a quadratic ([`super::signatures`]; our assumption: two levels a
 /// parameter of the quartic and the direction's term, six, so the fit keeps as many degrees
-/// of freedom as it has parameters). A static misfit of higher order than a
-/// quadratic (a gain curve of another shape than the catalogue's K'(u) leaves one) otherwise
+/// of freedom as it has parameters). A static misfit of higher order than a quadratic (a gain
+/// curve of another shape than the catalogue's K'(u) leaves one) otherwise
 /// leaks into the direction's coefficient where the levels reached from below sit mostly at
 /// one end, as on random levels: families case 1046, a tanh gain curve 196 mV deep on 18
 /// levels, read a 27 mV loop from it and took a false `hysteresis` (session 40).

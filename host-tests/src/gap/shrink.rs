@@ -45,10 +45,15 @@ impl ResidualCut {
     }
 }
 
-/// Does an effect whose kept steps did `cuts` meet the requirement? Every such step must, and
-/// an effect no kept step names does not (nothing shows its work).
-pub fn effect_meets(cuts: &[ResidualCut]) -> bool {
-    !cuts.is_empty() && cuts.iter().all(ResidualCut::meets)
+/// How `effect`, whose kept steps did `cuts`, falls short of the requirement, in words
+/// (`None`: it meets it). Every such step must meet it, and an effect no kept step names does
+/// not (nothing shows its work).
+pub fn shortfall(effect: &str, cuts: &[ResidualCut]) -> Option<String> {
+    match cuts.iter().find(|c| !c.meets()) {
+        Some(c) => Some(format!("{effect}: {c}")),
+        None if cuts.is_empty() => Some(format!("{effect}: no kept step names it")),
+        None => None,
+    }
 }
 
 impl std::fmt::Display for ResidualCut {

@@ -16,9 +16,9 @@
 //!   falling input at the same input level: hysteresis; in a record of steps alone (random
 //!   levels, no input that moves slowly) the gap between held levels reached from below and
 //!   from above, a static quadratic (a quartic on many levels) taken out, which counts where
-//!   the holds show no tail (a
-//!   creep that has not caught up leaves the same pattern) or the model already has a drift
-//!   (a creep and a loop together: the tails are the drift's; session 28);
+//!   the holds show no tail (a creep that has not caught up leaves the same pattern) or the
+//!   model already has a drift (a creep and a loop together: the tails are the drift's;
+//!   session 28);
 //! * **static curve** (settled samples): the curvature of the residual against the input:
 //!   non-linear gain;
 //! * **range**: whether the input comes near the amplifier's limits: saturation;
@@ -141,10 +141,9 @@ fn held_loop_from(d: &Data, r: &[f64], quartic_levels: usize) -> HeldLoop {
         return HeldLoop::TooFew;
     }
     // The direction's coefficient by its part the static polynomial does not explain (in the
-    // standardised input, so that it is well conditioned): where a few
-    // levels are each reached one way only (a square wave, a 0-5-10-0 cycle), the direction
-    // is a function of the level, the loop cannot be told from a static shape, and there is
-    // no answer.
+    // standardised input, so that it is well conditioned): where a few levels are each reached
+    // one way only (a square wave, a 0-5-10-0 cycle), the direction is a function of the
+    // level, the loop cannot be told from a static shape, and there is no answer.
     let n = pts.len() as f64;
     let mu = pts.iter().map(|p| p.0).sum::<f64>() / n;
     let sd = (pts.iter().map(|p| (p.0 - mu).powi(2)).sum::<f64>() / n).sqrt();
