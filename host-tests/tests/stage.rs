@@ -675,3 +675,53 @@ fn the_reading_at_rest_is_the_first_steps_reading() {
         }
     }
 }
+
+/// The stages `Stage::step_held` is checked on: every block the simulations use, the
+/// thesis' full stage with its noise and converters (the noise sequence must be the same),
+/// a second mode, play operators beside a DAC and a slew limit, and the linear model.
+fn held_step_stages() -> Vec<StageConfig> {
+    let full = StageConfig::thesis_full();
+    let mut two_modes = clean_full();
+    two_modes.second_mode = Some(ModeConfig {
+        mode_hz: params::SECOND_MODE_HZ,
+        damping: params::SECOND_MODE_DAMPING,
+    });
+    two_modes.hysteresis = Some(HysteresisTable::thesis_default());
+    let mut play = StageConfig::thesis_linear();
+    play.dac = true;
+    play.amplifier = model_core::amplifier::AmplifierConfig::default();
+    play.play = Some(model_core::play::PlayConfig {
+        radii_v: params::PLAY_RADII_V,
+        weights: [0.02, -0.01, 0.03, 0.0, 0.015, 0.01, -0.005, 0.02],
+    });
+    vec![full, two_modes, play, StageConfig::thesis_linear()]
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 48, ..ProptestConfig::default() })]
+
+    /// A hold of `n` steps at once leaves the state and the reading of `n` single steps, to
+    /// the bit: through slewing, the table's turning points, a command held at the code it
+    /// already had, and the sensor's noise.
+    #[test]
+    fn a_held_command_steps_as_its_single_steps(
+        which in 0usize..4,
+        holds in proptest::collection::vec((-1.0f32..11.0, 0u32..120, any::<bool>()), 1..40),
+    ) {
+        let stage = Stage::new(&held_step_stages()[which]).unwrap();
+        let mut one = stage.steady_state(holds[0].0);
+        let mut held = one.clone();
+        let mut last_u = holds[0].0;
+        for &(u, n, repeat) in &holds {
+            let u = if repeat { last_u } else { u };
+            last_u = u;
+            let mut y_one = one.signals().measured_v;
+            for _ in 0..n {
+                y_one = stage.step(&mut one, u);
+            }
+            let y_held = stage.step_held(&mut held, u, n);
+            prop_assert_eq!(y_one.to_bits(), y_held.to_bits(), "reading after {} steps at {} V", n, u);
+            prop_assert_eq!(&one, &held);
+        }
+    }
+}

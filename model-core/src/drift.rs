@@ -220,7 +220,13 @@ impl Drift {
     /// before this point; the state stays finite).
     #[inline]
     pub fn step(&self, s: &mut DriftState, u_v: f32) -> f32 {
-        let w = self.weight(u_v);
+        self.advance(s, self.weight(u_v))
+    }
+
+    /// One step with the weight `w = K(u) u` already computed (a held input's, reused);
+    /// a non-finite weight counts as 0, as in [`Self::step`].
+    #[inline]
+    pub fn advance(&self, s: &mut DriftState, w: f32) -> f32 {
         let w = if w.is_finite() { w } else { 0.0 };
         for (lag, y) in self.lags.iter().zip(s.y.iter_mut()) {
             lag.step(y, w);

@@ -151,6 +151,13 @@ impl Sensor {
         self.converted(y)
     }
 
+    /// Whether [`Self::measure`] adds noise (and so advances its state): without noise it is a
+    /// pure function of the position.
+    #[inline]
+    pub fn is_noisy(&self) -> bool {
+        self.noise_v > 0.0
+    }
+
     /// `y_v` as the monitor gives it: through the ADC's codes where the sensor has one.
     #[inline]
     fn converted(&self, y_v: f32) -> f32 {

@@ -564,6 +564,65 @@ impl Stage {
         };
         measured_v
     }
+
+    /// `n` steps of [`Self::step`] with the command `u_v` held: the same state and the same
+    /// reading, to the bit, in fewer operations (the host's simulations of records sampled
+    /// slower than the stage: a 1 kHz record holds each input for 50 steps).
+    ///
+    /// Once a step leaves the amplifier's output where it was and the hysteresis table will
+    /// reuse its last output (or there is no table), the fast part is at a fixed point: the
+    /// DAC and the amplifier give the same `ue`, the table the same output, the play
+    /// operators (clamps, so applying the same input twice is applying it once) the same
+    /// sum, K'(u) and the drift's weight the same values. The remaining steps then advance
+    /// only the drift's lags and the dynamics with that value, and read the sensor (a pure
+    /// function without noise) once at the end; with noise, every step, so that the noise
+    /// sequence is the one `n` calls of [`Self::step`] draw. Bounded: `n` steps at most; no
+    /// panic. Not for the 50 kHz path (the board steps once per sample).
+    pub fn step_held(&self, s: &mut StageState, u_v: f32, n: u32) -> f32 {
+        let mut left = n;
+        let mut measured_v = s.signals.measured_v;
+        while left > 0 {
+            let before_v = s.amplifier.output_v;
+            measured_v = self.step(s, u_v);
+            left -= 1;
+            let ue = s.signals.amplifier_v * self.inv_nominal_gain;
+            let table_reuses = match &self.hysteresis {
+                Some(_) => s.hysteresis.depth() > 0 && ue == s.hysteresis.input_v(),
+                None => true,
+            };
+            if s.amplifier.output_v.to_bits() == before_v.to_bits() && table_reuses {
+                break;
+            }
+        }
+        if left == 0 {
+            return measured_v;
+        }
+        let fast_v = s.signals.fast_v;
+        let ue = s.signals.amplifier_v * self.inv_nominal_gain;
+        let weight = self.drift.as_ref().map(|d| d.weight(ue));
+        let noisy = self.sensor.is_noisy();
+        let mut drift_v = s.signals.drift_v;
+        let mut position_v = s.signals.position_v;
+        for _ in 0..left {
+            if let (Some(d), Some(w)) = (&self.drift, weight) {
+                drift_v = d.advance(&mut s.drift, w);
+            }
+            position_v = match &self.second_mode {
+                Some(m) => m.step(&mut s.second_mode, fast_v + drift_v),
+                None => self.plant.step(&mut s.plant, fast_v + drift_v),
+            };
+            if noisy {
+                measured_v = self.sensor.measure(&mut s.sensor, position_v);
+            }
+        }
+        if !noisy {
+            measured_v = self.sensor.measure(&mut s.sensor, position_v);
+        }
+        s.signals.drift_v = drift_v;
+        s.signals.position_v = position_v;
+        s.signals.measured_v = measured_v;
+        measured_v
+    }
 }
 
 /// Open-loop feedforward of the static map and the drift (issue #4, item 8): the command that

@@ -61,9 +61,12 @@ pub fn simulate_after_while(
             .floor()
             .max(0.0) as u64;
         let held = if i == 0 { u_v[0] } else { u_v[i - 1] } as f32;
+        // The steps of one hold at once (`Stage::step_held`: the same readings as step by
+        // step, to the bit); at most 2^32 - 1 a call, so a longer hold takes several.
         while k < until {
-            last = stage.step(&mut s, held);
-            k += 1;
+            let steps = (until - k).min(u32::MAX as u64) as u32;
+            last = stage.step_held(&mut s, held, steps);
+            k += steps as u64;
         }
         if !go_on(i, last as f64) {
             return None;
