@@ -562,9 +562,13 @@ fn run_suite() -> Option<Tally> {
 
 /// What the workflow holds on the drawn cases today, as a guard against regressions (the
 /// test command runs it and prints the confusion table): no name on a clean record, and at
-/// least 81 % exact named sets with at most 3.7 % false names, and at least 97 % of the
+/// least 80 % exact named sets with at most 2.9 % false names, and at least 97 % of the
 /// correctly named effects meeting the issue's residual cut (`gap::shrink`), in release with
-/// the default 100 cases (`GAP_CASES` unset). Measured in session 40 (the held levels' loop
+/// the default 100 cases (`GAP_CASES` unset). Measured in session 41 (a look-alike named only
+/// beside a stepping stone the final check took out is not named, `select.rs` after the final
+/// check: 1074's false curvature gone, and 1040's scale, named by the same path, now reported
+/// as a pair the records cannot tell): 83.0 % exact, 1 false name of 106 (0.9 %), 0 of 15
+/// clean cases named, 93 exact or honest, the cut 104 of 105 (99.0 %). Session 40 (the held levels' loop
 /// with a quartic static part on many levels, `HELD_LOOP_QUARTIC_LEVELS`: 1046's false loop
 /// gone): 84.0 % exact, 2 false names of 108 (1.9 %), 0 of 15 clean cases named, 92 exact or
 /// honest; the cut, first measured then: 105 of 106 (99.1 %), the one short case 1002, a
@@ -593,9 +597,9 @@ fn run_suite() -> Option<Tally> {
 fn randomised_families_hold_their_measured_rates() {
     let full_run = std::env::var("GAP_CASES").is_err();
     suite_meets(
-        [81.0, 3.7, 97.0],
+        [80.0, 2.9, 97.0],
         full_run,
-        "the measured 84 %, 1.9 % and 99.1 % with their margins",
+        "the measured 83 %, 0.9 % and 99.0 % with their margins",
     );
 }
 
@@ -630,7 +634,7 @@ fn suite_meets([exact_pct, false_pct, cut_pct]: [f64; 3], rates: bool, what: &st
 
 /// Issue #12's requirements on 100 drawn cases: >= 95 % exact named sets, <= 1 % false names
 /// (of the names given), no name on a clean record, every correctly named effect meeting the
-/// residual cut. Not met: 84.0 % exact, 1.9 % false names and 99.1 % of the cuts (see the
+/// residual cut. Not met: 83.0 % exact and 99.0 % of the cuts (false names 0.9 %, met; see the
 /// test above and `host-tests/GAP.md`); most failures are a loop of another form (Bouc-Wen,
 /// Duhem) on a sine or a chirp beside a static shape the records cannot tell
 /// from the table's misfit.
@@ -1145,7 +1149,10 @@ fn a_creep_without_holds_is_named_as_drift() {
 /// `hysteresis` named and no name the reference lacks, and the final residual within 2.5x of
 /// the reference's or 2x the floor (measured 0.72-1.07x of it with session 33's candidates,
 /// 0.99-2.03x with session 34's: the start search picks from a grid of rest states, and an
-/// off-grid one is fitted by the nearest, which leaves part of its head).
+/// off-grid one is fitted by the nearest, which leaves part of its head). Session 41: 4203's
+/// parked stage no longer names the false `sensor-gain` its reference names (a look-alike of
+/// a curvature, named only beside a stepping stone the final check took out) and ends at
+/// 3.69x the floor, 2.07x its reference's 1.78x.
 #[test]
 fn a_stage_parked_after_a_scan_elsewhere_is_fitted_from_there() {
     // (the scan's last turn, volts: below the table's grid step)
