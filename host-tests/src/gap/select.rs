@@ -1511,6 +1511,7 @@ fn diagnose_split(
         .collect();
     // Final check: take each named effect back out (refitting the slow ones left) and keep it
     // only if the residual above the noise floor grows by PRUNE_RATIO at least.
+    let mut taken_out: Vec<String> = Vec::new();
     while !named.is_empty() {
         if let Some(b) = &bar {
             b.set_message("final check of each named effect");
@@ -1706,6 +1707,7 @@ fn diagnose_split(
             });
         }
         named.retain(|x| !unit.contains(x));
+        taken_out.extend(unit);
         model = m;
         sims = s;
         cur_mse = ms;
@@ -1716,12 +1718,24 @@ fn diagnose_split(
     // the effects it was compared beside once that effect is taken out. The records' own
     // comparison then says it cannot be told from its rival: it goes too, and the pair is
     // reported (families case 1074: a curvature and a scale alike beside a Bouc-Wen loop on a
-    // chirp; a drift came in between, the curvature after it, and the drift went).
-    for _ in 0..named.len() {
+    // chirp; a drift came in between, the curvature after it, and the drift went). Only where
+    // the final check took out an effect named after the pair was found: a step that named a
+    // refit of an effect already named leaves the named set as it was and may tell the two
+    // apart by itself. (The swaps and the rest reading below may still bring the shape or its
+    // rival back on their own evidence; the pair is then dropped from the report, as any pair
+    // a later step names.)
+    // The pair is judged again beside the final model, by the steps' own test: the rival
+    // fitted in the shape's place must explain alike (`explain_alike`) what the shape explains
+    // of the residual the model without it leaves; a shape the final model tells apart stays.
+    let mut judged_again: Vec<(String, String)> = Vec::new();
+    for _ in 0..2 * look_alikes.len() {
         let settled = look_alikes.iter().find_map(|(a, b, before)| {
+            let stone_gone = taken_out.iter().any(|t| !before.contains(t));
             [(a, b), (b, a)].into_iter().find_map(|(e, r)| {
                 let rest: Vec<&String> = named.iter().filter(|n| *n != e).collect();
-                (named.contains(e)
+                (stone_gone
+                    && !judged_again.contains(&(e.clone(), r.clone()))
+                    && named.contains(e)
                     && !named.contains(r)
                     && rest.len() == before.len()
                     && rest.iter().all(|n| before.contains(n)))
@@ -1738,6 +1752,27 @@ fn diagnose_split(
         let Ok((s, ms)) = simulate_all(&m, data) else {
             break;
         };
+        judged_again.push((e.clone(), r.clone()));
+        let Some((_, _, r_mse)) = fit_slow_set(&m, data, &slow_x, &[r.as_str()], u_range) else {
+            continue;
+        };
+        let above = |x: &[f64]| {
+            x.iter()
+                .zip(&var)
+                .map(|(m, v)| (m - v).max(0.0))
+                .sum::<f64>()
+        };
+        let share = |x: &[f64]| {
+            let without = above(&ms);
+            if without > 0.0 {
+                1.0 - above(x) / without
+            } else {
+                0.0
+            }
+        };
+        if !explain_alike((share(&cur_mse), &cur_mse), (share(&r_mse), &r_mse), &var) {
+            continue;
+        }
         let beside = if named.len() > 1 {
             named
                 .iter()
@@ -1755,7 +1790,11 @@ fn diagnose_split(
                 format!(
                     "removed: beside {beside}, the effects still named, a step found that the \
                      records cannot tell it from {r}; it was named later only beside an effect \
-                     the final check took out"
+                     the final check took out, and beside the final model {r} fitted in its \
+                     place still explains alike ({:.0} % against {:.0} % of what the model \
+                     without it leaves above the noise floor)",
+                    100.0 * share(&r_mse),
+                    100.0 * share(&cur_mse)
                 ),
                 &cur_mse,
                 &ms,
