@@ -165,7 +165,21 @@ pub(super) fn unexplained_words(final_rms_v: f64, pairs: &[CannotTell]) -> Strin
             && c.rms_v.to_bits() == final_rms_v.to_bits()
             && c.alternative_clearly_less()
     });
+    // Look-alikes left unnamed: each explains part of the residual, and the records cannot
+    // tell which (a plain "none admissible" beside the pairs' "would explain 90 %" read as a
+    // contradiction).
+    let alike: Vec<String> = pairs
+        .iter()
+        .filter(|c| c.neither_named)
+        .map(|c| format!("{} / {}", c.named, c.alternative))
+        .collect();
     match taken_out {
+        None if !alike.is_empty() => format!(
+            "no catalogued effect is admissible on its own: the look-alikes {} explain part \
+             of it alike and the records cannot tell which (the pairs above), so none of them \
+             is named",
+            alike.join(", ")
+        ),
         None => "no catalogued effect is admissible".into(),
         Some(c) => format!(
             "no catalogued effect is admissible that the records show: an {} beside the final \
@@ -575,9 +589,9 @@ mod tests {
     /// The unexplained part says what an offset the final check took out left only where
     /// that check's model is the final one (its residual to the bit), and the offset left
     /// clearly less (families case 1001: 1.53 mV with it, 52.57 mV without); other pairs
-    /// with the final model on one side (a rest reading the offset did not take, a look-alike
-    /// of `cannot_tell`), a check's model that later steps changed, or an offset that left
-    /// about as much, keep the plain words.
+    /// with the final model on one side (a rest reading the offset did not take), a check's
+    /// model that later steps changed, or an offset that left about as much, keep the plain
+    /// words; look-alikes left unnamed (`neither_named`) are listed in them.
     #[test]
     fn the_unexplained_part_says_what_an_offset_taken_out_left() {
         let plain = "no catalogued effect is admissible";
@@ -589,6 +603,17 @@ mod tests {
         assert_eq!(
             unexplained_words(final_v, &[other_kind.clone(), changed_since, alike]),
             plain
+        );
+        let look_alike = CannotTell {
+            named: "nonlinear-gain".into(),
+            alternative: "sensor-gain".into(),
+            neither_named: true,
+            ..pair(final_v, final_v / 3.0, false)
+        };
+        let w = unexplained_words(final_v, &[other_kind.clone(), look_alike]);
+        assert!(
+            w.starts_with("no catalogued effect is admissible on its own: the look-alikes nonlinear-gain / sensor-gain explain part of it alike"),
+            "{w}"
         );
         let w = unexplained_words(final_v, &[other_kind, pair(final_v, 1.53e-3, true)]);
         assert!(
