@@ -413,6 +413,14 @@ impl Stage {
         }
     }
 
+    /// The amplifier's output in control-input volts (`ue`, what the static map and the drift
+    /// take): one expression for every caller, so that [`Self::step_held`] computes the `ue`
+    /// [`Self::step`] does, to the bit.
+    #[inline]
+    fn control_input_v(&self, amplifier_v: f32) -> f32 {
+        amplifier_v * self.inv_nominal_gain
+    }
+
     /// K'(u) times `h`, or `h` without the non-linear gain.
     #[inline]
     fn scale(&self, ue_v: f32, h: f32) -> f32 {
@@ -451,7 +459,7 @@ impl Stage {
     /// settled; with hysteresis: on the major rising curve, as after [`Self::steady_state`]):
     /// what the plant's output settles to (before the sensor).
     pub fn static_output(&self, u_v: f32) -> f32 {
-        let ue = self.amplifier.static_output(self.dac(u_v)) * self.inv_nominal_gain;
+        let ue = self.control_input_v(self.amplifier.static_output(self.dac(u_v)));
         let drift = self
             .drift
             .as_ref()
@@ -491,7 +499,7 @@ impl Stage {
         let u_v = if u_v.is_finite() { u_v } else { 0.0 };
         let command_v = self.dac(u_v);
         let amplifier = self.amplifier.steady_state(command_v);
-        let ue = amplifier.output_v * self.inv_nominal_gain;
+        let ue = self.control_input_v(amplifier.output_v);
         let drift = self
             .drift
             .as_ref()
@@ -540,7 +548,7 @@ impl Stage {
     pub fn step(&self, s: &mut StageState, u_v: f32) -> f32 {
         let command_v = self.dac(u_v);
         let amplifier_v = self.amplifier.step(&mut s.amplifier, command_v);
-        let ue = amplifier_v * self.inv_nominal_gain;
+        let ue = self.control_input_v(amplifier_v);
         let mut fast_v = self.fast(&mut s.hysteresis, ue);
         if let Some(p) = &self.play {
             fast_v += self.scale(ue, p.step(&mut s.play, ue));
@@ -585,7 +593,7 @@ impl Stage {
             let before_v = s.amplifier.output_v;
             measured_v = self.step(s, u_v);
             left -= 1;
-            let ue = s.signals.amplifier_v * self.inv_nominal_gain;
+            let ue = self.control_input_v(s.signals.amplifier_v);
             let table_reuses = match &self.hysteresis {
                 Some(_) => s.hysteresis.depth() > 0 && ue == s.hysteresis.input_v(),
                 None => true,
@@ -598,7 +606,7 @@ impl Stage {
             return measured_v;
         }
         let fast_v = s.signals.fast_v;
-        let ue = s.signals.amplifier_v * self.inv_nominal_gain;
+        let ue = self.control_input_v(s.signals.amplifier_v);
         let weight = self.drift.as_ref().map(|d| d.weight(ue));
         let noisy = self.sensor.is_noisy();
         let mut drift_v = s.signals.drift_v;

@@ -622,6 +622,21 @@ fn cannot_tell(
         .collect()
 }
 
+/// The share of the residual power above the noise floor, over the records `set`, that a
+/// model leaving the mean squares `after` explains of what one leaving `before` leaves (each
+/// record's power above its noise variance `var`, none below it); 0 where `before` leaves
+/// none. The steps' candidates and the look-alikes judged again after the final check are
+/// weighed by it.
+fn explained_share(before: &[f64], after: &[f64], var: &[f64], set: &[usize]) -> f64 {
+    let above = |m: &[f64]| set.iter().map(|&i| (m[i] - var[i]).max(0.0)).sum::<f64>();
+    let before = above(before);
+    if before > 0.0 {
+        1.0 - above(after) / before
+    } else {
+        0.0
+    }
+}
+
 /// Do two fits explain alike: the second explains at least `1 / STATIC_TELL_RATIO` of what
 /// the first explains (shares of the residual power above the floor, pooled over the records)
 /// and leaves at most `STATIC_TELL_RATIO` times as much, and they leave alike in every record
@@ -1111,13 +1126,7 @@ fn diagnose_split(
                 })
                 .sum::<f64>()
                 + c.k as f64 * (n_set as f64).ln();
-            let ex = |m: &[f64]| set.iter().map(|&i| (m[i] - var[i]).max(0.0)).sum::<f64>();
-            let ex0 = ex(&cur_mse);
-            let explained = if ex0 > 0.0 {
-                1.0 - ex(&c.mse) / ex0
-            } else {
-                0.0
-            };
+            let explained = explained_share(&cur_mse, &c.mse, &var, set);
             let harmless = (0..data.len()).all(|i| {
                 let before = (cur_mse[i] - var[i]).max(0.0);
                 let after = (c.mse[i] - var[i]).max(0.0);
@@ -1756,20 +1765,8 @@ fn diagnose_split(
         let Some((_, _, r_mse)) = fit_slow_set(&m, data, &slow_x, &[r.as_str()], u_range) else {
             continue;
         };
-        let above = |x: &[f64]| {
-            x.iter()
-                .zip(&var)
-                .map(|(m, v)| (m - v).max(0.0))
-                .sum::<f64>()
-        };
-        let share = |x: &[f64]| {
-            let without = above(&ms);
-            if without > 0.0 {
-                1.0 - above(x) / without
-            } else {
-                0.0
-            }
-        };
+        let every: Vec<usize> = (0..data.len()).collect();
+        let share = |x: &[f64]| explained_share(&ms, x, &var, &every);
         if !explain_alike((share(&cur_mse), &cur_mse), (share(&r_mse), &r_mse), &var) {
             continue;
         }
