@@ -562,9 +562,14 @@ fn run_suite() -> Option<Tally> {
 
 /// What the workflow holds on the drawn cases today, as a guard against regressions (the
 /// test command runs it and prints the confusion table): no name on a clean record, and at
-/// least 80 % exact named sets with at most 2.9 % false names, and at least 97 % of the
-/// correctly named effects meeting the issue's residual cut (`gap::shrink`), in release with
-/// the default 100 cases (`GAP_CASES` unset). Measured in session 41 (a look-alike named only
+/// least 80 % exact named sets with at most 2.9 % false names, at least 97 % of the
+/// correctly named effects meeting the issue's residual cut (`gap::shrink`), and at least 94 %
+/// of the cases exact or honest, in release with the default 100 cases (`GAP_CASES` unset).
+/// Measured in session 42 (what the final check takes out is said: the shapes that could do
+/// the work of an offset it takes out as an unshown level, and a scale or curvature beside
+/// the table it takes out below its bar after a growth over 1.25x, are reported in pairs):
+/// the names and figures of session 41, case by case, and 97 exact or honest (1001, 1020,
+/// 1061 and 1068's missed effects now in pairs). Measured in session 41 (a look-alike named only
 /// beside a stepping stone the final check took out is not named, `select.rs` after the final
 /// check: 1074's false curvature gone, and 1040's scale, named by the same path, now reported
 /// as a pair the records cannot tell): 83.0 % exact, 1 false name of 106 (0.9 %), 0 of 15
@@ -597,17 +602,19 @@ fn run_suite() -> Option<Tally> {
 fn randomised_families_hold_their_measured_rates() {
     let full_run = std::env::var("GAP_CASES").is_err();
     suite_meets(
-        [80.0, 2.9, 97.0],
+        [80.0, 2.9, 97.0, 94.0],
         full_run,
-        "the measured 83 %, 0.9 % and 99.0 % with their margins",
+        "the measured 83 %, 0.9 %, 99.0 % and 97 % with their margins",
     );
 }
 
 /// Runs the suite ([`run_suite`]) and asserts no name on a clean record and, in release
 /// where `rates` (with 100 cases at least), at least `exact_pct` exact named sets, at most
-/// `false_pct` false names and at least `cut_pct` of the correctly named effects meeting the
-/// residual cut; `what` names the figures in the messages.
-fn suite_meets([exact_pct, false_pct, cut_pct]: [f64; 3], rates: bool, what: &str) {
+/// `false_pct` false names, at least `cut_pct` of the correctly named effects meeting the
+/// residual cut and at least `said_pct` cases exact or honest ([`Outcome::said`]; 0 where
+/// the figures are the issue's, which asks for exact sets only); `what` names the figures in
+/// the messages.
+fn suite_meets([exact_pct, false_pct, cut_pct, said_pct]: [f64; 4], rates: bool, what: &str) {
     let Some(all) = run_suite() else {
         return;
     };
@@ -629,6 +636,11 @@ fn suite_meets([exact_pct, false_pct, cut_pct]: [f64; 3], rates: bool, what: &st
             "residual cut met by {:.1} % below {cut_pct} % ({what})",
             all.cut_pct()
         );
+        let said = 100.0 * all.said as f64 / all.cases as f64;
+        assert!(
+            said >= said_pct,
+            "exact or honest {said:.1} % below {said_pct} % ({what})"
+        );
     }
 }
 
@@ -641,7 +653,7 @@ fn suite_meets([exact_pct, false_pct, cut_pct]: [f64; 3], rates: bool, what: &st
 #[test]
 #[ignore = "issue #12: workflow does not yet meet this on all families"]
 fn randomised_families_are_named() {
-    suite_meets([95.0, 1.0, 100.0], true, "issue #12's figures");
+    suite_meets([95.0, 1.0, 100.0, 0.0], true, "issue #12's figures");
 }
 
 /// What a real recording adds, on cases drawn as the suite draws them but from seeds it never

@@ -14,7 +14,7 @@ use super::catalogue;
 use super::constants::CANNOT_TELL_RATIO;
 use super::data::Data;
 use super::everett::CentreLine;
-use super::select::{CannotTell, Diagnosis};
+use super::select::{CannotTell, Diagnosis, TakenOut};
 use crate::io::model_file::ModelFile;
 use anyhow::Context;
 use plotters::prelude::*;
@@ -154,14 +154,19 @@ impl Diagnosis {
 
 /// Why the unexplained residual stays, in words: no catalogued effect is admissible, or, where
 /// the final check took an offset beside the table out as a level the records do not show
-/// (`CannotTell::taken_out_unshown`), the final model is still that check's (its residual is
+/// ([`TakenOut::Unshown`]), the final model is still that check's (its residual is
 /// the pair's figure without the offset, to the bit) and the offset left clearly less
 /// ([`CannotTell::alternative_clearly_less`]), what it left and why it is not named: the residual is not
 /// beyond the catalogue, the records do not show that constant as a level. Both figures are
 /// residual RMS, noise included (the unexplained part's own figure has the noise taken out).
+/// Look-alikes left unnamed (`neither_named`) are listed, after the offset's words where both
+/// stand (there, the shapes that could have done its work, [`TakenOut::InOffsetsPlace`]);
+/// else static shapes the final check took out below their bars beside a table
+/// ([`TakenOut::BelowBar`]): they took part of the residual, but the others' refit, the
+/// table's among them, took up most of the same work.
 pub(super) fn unexplained_words(final_rms_v: f64, pairs: &[CannotTell]) -> String {
     let taken_out = pairs.iter().find(|c| {
-        c.taken_out_unshown
+        c.taken_out == TakenOut::Unshown
             && c.rms_v.to_bits() == final_rms_v.to_bits()
             && c.alternative_clearly_less()
     });
@@ -170,28 +175,75 @@ pub(super) fn unexplained_words(final_rms_v: f64, pairs: &[CannotTell]) -> Strin
     // contradiction).
     let alike: Vec<String> = pairs
         .iter()
-        .filter(|c| c.neither_named)
+        .filter(|c| c.neither_named && c.taken_out == TakenOut::No)
+        .map(|c| format!("{} / {}", c.named, c.alternative))
+        .collect();
+    // Shapes that could have done the work of an offset the final check took out.
+    let in_place: Vec<String> = pairs
+        .iter()
+        .filter(|k| k.taken_out == TakenOut::InOffsetsPlace)
+        .map(|k| k.named.clone())
+        .collect();
+    let in_place_words = format!(
+        "{} fitted in its place each explain a step's share of what was left, and the records \
+         do not say which shape's work it did, if any (the pairs above), so none of them is \
+         named",
+        in_place.join(" and ")
+    );
+    let alike_words = |opening: &str| {
+        format!(
+            "{opening}the look-alikes {} explain part of it alike and the records cannot tell \
+             which (the pairs above), so none of them is named",
+            alike.join(", ")
+        )
+    };
+    // Static shapes the final check took out below their bars beside a table: each took part
+    // of it, and the table's refit took up most of the same work.
+    let below_bar: Vec<String> = pairs
+        .iter()
+        .filter(|c| c.taken_out == TakenOut::BelowBar)
         .map(|c| format!("{} / {}", c.named, c.alternative))
         .collect();
     match taken_out {
-        None if !alike.is_empty() => format!(
-            "no catalogued effect is admissible on its own: the look-alikes {} explain part \
-             of it alike and the records cannot tell which (the pairs above), so none of them \
-             is named",
-            alike.join(", ")
+        None if !alike.is_empty() => alike_words("no catalogued effect is admissible on its own: "),
+        None if !in_place.is_empty() => format!(
+            "no catalogued effect is admissible that the records show: the final check took out \
+             an offset beside the table whose work was not a level; {in_place_words}"
+        ),
+        None if !below_bar.is_empty() => format!(
+            "no catalogued effect earns its parameters on these records: the final check took \
+             out a static shape that took part of it beside the table, the others' refit (the \
+             table's among them) takes up most of the same work, and the records cannot tell \
+             the two ({} above)",
+            pairs_words(&below_bar)
         ),
         None => "no catalogued effect is admissible".into(),
-        Some(c) => format!(
-            "no catalogued effect is admissible that the records show: an {} beside the final \
-             model's effects left {:.2} mV of residual (the final model {:.2} mV), but the \
-             final check took it out as a level the residual without it does not show (the \
-             {} / {} pair above)",
-            c.alternative,
-            1e3 * c.alternative_rms_v,
-            1e3 * final_rms_v,
-            c.named,
-            c.alternative
-        ),
+        Some(c) => {
+            let taken = format!(
+                "no catalogued effect is admissible that the records show: an {} beside the \
+                 final model's effects left {:.2} mV of residual (the final model {:.2} mV), \
+                 but the final check took it out as a level the residual without it does not \
+                 show (the {} / {} pair above)",
+                c.alternative,
+                1e3 * c.alternative_rms_v,
+                1e3 * final_rms_v,
+                c.named,
+                c.alternative
+            );
+            if in_place.is_empty() {
+                taken
+            } else {
+                format!("{taken}; {in_place_words}")
+            }
+        }
+    }
+}
+
+/// "the A / B pair" or "the A / B and C / D pairs".
+fn pairs_words(pairs: &[String]) -> String {
+    match pairs {
+        [one] => format!("the {one} pair"),
+        _ => format!("the {} pairs", pairs.join(" and ")),
     }
 }
 
@@ -581,7 +633,11 @@ mod tests {
             rms_v,
             alternative_rms_v: alt_v,
             neither_named: false,
-            taken_out_unshown: taken_out,
+            taken_out: if taken_out {
+                TakenOut::Unshown
+            } else {
+                TakenOut::No
+            },
             why: String::new(),
         }
     }
@@ -591,7 +647,10 @@ mod tests {
     /// clearly less (families case 1001: 1.53 mV with it, 52.57 mV without); other pairs
     /// with the final model on one side (a rest reading the offset did not take), a check's
     /// model that later steps changed, or an offset that left about as much, keep the plain
-    /// words; look-alikes left unnamed (`neither_named`) are listed in them.
+    /// words; look-alikes left unnamed (`neither_named`) are listed in them, the shapes that
+    /// could have done a taken-out offset's work after its words (or alone where later steps
+    /// changed the model), and shapes taken out below their bars beside a table by their
+    /// pairs.
     #[test]
     fn the_unexplained_part_says_what_an_offset_taken_out_left() {
         let plain = "no catalogued effect is admissible";
@@ -601,7 +660,7 @@ mod tests {
         let changed_since = pair(60e-3, 1.53e-3, true);
         let alike = pair(final_v, final_v / 1.2, true);
         assert_eq!(
-            unexplained_words(final_v, &[other_kind.clone(), changed_since, alike]),
+            unexplained_words(final_v, &[other_kind.clone(), changed_since.clone(), alike]),
             plain
         );
         let look_alike = CannotTell {
@@ -615,9 +674,54 @@ mod tests {
             w.starts_with("no catalogued effect is admissible on its own: the look-alikes nonlinear-gain / sensor-gain explain part of it alike"),
             "{w}"
         );
-        let w = unexplained_words(final_v, &[other_kind, pair(final_v, 1.53e-3, true)]);
+        let taken = pair(final_v, 1.53e-3, true);
+        let w = unexplained_words(final_v, &[other_kind.clone(), taken.clone()]);
         assert!(
             w.contains("an offset beside the final model's effects left 1.53 mV of residual (the final model 52.57 mV)"),
+            "{w}"
+        );
+        assert!(!w.contains("look-alikes"), "{w}");
+        // The shapes that could have done that offset's work are listed after it, and
+        // without it where later steps changed the final model (not as look-alikes).
+        let in_its_place = CannotTell {
+            named: "sensor-gain".into(),
+            alternative: "offset".into(),
+            neither_named: true,
+            taken_out: TakenOut::InOffsetsPlace,
+            ..pair(1.6e-3, 1.53e-3, false)
+        };
+        let w = unexplained_words(final_v, &[taken, in_its_place.clone()]);
+        assert!(
+            w.contains("(the hysteresis / offset pair above); sensor-gain fitted in its place each explain a step's share"),
+            "{w}"
+        );
+        let w = unexplained_words(final_v, &[changed_since, in_its_place]);
+        assert!(
+            w.starts_with("no catalogued effect is admissible that the records show: the final check took out an offset beside the table whose work was not a level; sensor-gain fitted")
+                && !w.contains("look-alikes"),
+            "{w}"
+        );
+        // A shape taken out below its bar beside the table is named in the words.
+        let below = CannotTell {
+            alternative: "nonlinear-gain".into(),
+            taken_out: TakenOut::BelowBar,
+            ..pair(final_v, final_v / 1.5, false)
+        };
+        let w = unexplained_words(final_v, &[other_kind.clone(), below.clone()]);
+        assert!(
+            w.starts_with("no catalogued effect earns its parameters on these records")
+                && w.contains("(the hysteresis / nonlinear-gain pair above)"),
+            "{w}"
+        );
+        let scale = CannotTell {
+            alternative: "sensor-gain".into(),
+            ..below.clone()
+        };
+        let w = unexplained_words(final_v, &[other_kind, below, scale]);
+        assert!(
+            w.contains(
+                "(the hysteresis / nonlinear-gain and hysteresis / sensor-gain pairs above)"
+            ),
             "{w}"
         );
     }

@@ -264,8 +264,12 @@ impl Diagnosis {
 /// ([`STATIC_TELL_RATIO`], pooled and in every record: `explain_alike`), of which neither is
 /// named at that step (`neither_named`; dropped from the list where a later step, or a pair
 /// with an offset at the same step, names one of them); or an offset beside a table that the
-/// final check took out as a level the records do not show (`taken_out_unshown`), whatever
-/// the two leave.
+/// final check took out as a level the records do not show ([`TakenOut::Unshown`]), whatever
+/// the two leave, with the static shapes that, fitted in its place, explain a step's share of
+/// what the model without it leaves ([`TakenOut::InOffsetsPlace`], `neither_named`); or a
+/// static shape beside a table on records without holds that the final check took out below
+/// its bar, though the residual without it grew by more than [`CANNOT_TELL_RATIO`]
+/// ([`TakenOut::BelowBar`]).
 #[derive(Clone, Debug, serde::Serialize)]
 pub struct CannotTell {
     /// The effect named (with `neither_named`: the one the step would have added).
@@ -278,20 +282,41 @@ pub struct CannotTell {
     pub alternative_rms_v: f64,
     /// Neither effect was named: the records leave the choice between them to chance.
     pub neither_named: bool,
-    /// The final check took `alternative` (an offset beside a table) out as a level the
-    /// records do not show: `alternative_rms_v` is what the model left with it, `rms_v` without
-    /// it, and the two need not be alike (the report's unexplained part says so where the
-    /// second is clearly larger). Not in the JSON (its keys stay).
+    /// How the final check made the pair, where it did ([`TakenOut`]). Not in the JSON (its
+    /// keys stay).
     #[serde(skip)]
-    pub taken_out_unshown: bool,
+    pub taken_out: TakenOut,
     /// Why, and what record would tell them apart.
     pub why: String,
+}
+
+/// How the final check made a [`CannotTell`] pair.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum TakenOut {
+    /// It did not: a step's pair, or a later rule's.
+    #[default]
+    No,
+    /// It took `alternative` (an offset beside a table) out as a level the records do not
+    /// show: `alternative_rms_v` is what the model left with it, `rms_v` without it, and the
+    /// two need not be alike (the report's unexplained part says so where the second is
+    /// clearly larger).
+    Unshown,
+    /// A static shape (`named`) fitted in the place of such an offset (`alternative`) beside
+    /// the effects still named then explains at least a step's share of what the model
+    /// without the offset leaves: the offset's work may have been the shape's. Neither is
+    /// named.
+    InOffsetsPlace,
+    /// It took `alternative` (a scale or a curvature beside a table, on records without
+    /// holds) out below its bar, though the residual without it grew by more than
+    /// [`CANNOT_TELL_RATIO`]: the others' refit, the table's among them, took up most of its
+    /// work. `alternative_rms_v` is what the model left with it, `rms_v` without it.
+    BelowBar,
 }
 
 impl CannotTell {
     /// Does the alternative leave clearly less than the named side (by [`CANNOT_TELL_RATIO`],
     /// RMS)? Then the two are not alike in residual, and what keeps the alternative out is
-    /// another reason (`taken_out_unshown`: a level the records do not show).
+    /// another reason ([`TakenOut::Unshown`]: a level the records do not show).
     pub fn alternative_clearly_less(&self) -> bool {
         self.alternative_rms_v * CANNOT_TELL_RATIO < self.rms_v
     }
@@ -472,7 +497,7 @@ fn offset_moved(
         named: holder.into(),
         alternative: "offset".into(),
         neither_named: false,
-        taken_out_unshown: false,
+        taken_out: TakenOut::No,
         rms_v: rms_of(after),
         alternative_rms_v: rms_of(before),
         why,
@@ -605,7 +630,7 @@ fn cannot_tell(
             let near = ms.iter().zip(cur_mse).all(|(a, b)| *a <= r2 * *b);
             near.then(|| CannotTell {
                 neither_named: false,
-                taken_out_unshown: false,
+                taken_out: TakenOut::No,
                 named: e.to_string(),
                 alternative: f.to_string(),
                 rms_v: rms_of(cur_mse),
@@ -616,6 +641,51 @@ fn cannot_tell(
                      protocol) to tell them apart",
                     1e3 * rms_of(&ms),
                     1e3 * rms_of(cur_mse)
+                ),
+            })
+        })
+        .collect()
+}
+
+/// The static shapes (not `named`) that could do the work of an offset the final check took
+/// out as a level the records do not show: `m` the model without it, leaving the mean squares
+/// `without`, and `with` what the model with it left. Each is fitted in the offset's place
+/// beside `m`, and one that explains at least [`MIN_EXPLAINED`] of what is left (a step's
+/// bar) is reported with the offset as a pair of which neither is named: the steps preferred
+/// the offset by its score, and the final check found its work was not a level.
+fn shapes_in_offsets_place(
+    (m, without, with): (&ModelFile, &[f64], &[f64]),
+    named: &[String],
+    data: &[Data],
+    slow_x: &SlowRegressors,
+    u_range: (f64, f64),
+    var: &[f64],
+) -> Vec<CannotTell> {
+    let every: Vec<usize> = (0..data.len()).collect();
+    let share = |x: &[f64]| explained_share(without, x, var, &every);
+    STATIC_SHAPES
+        .iter()
+        .filter(|s| **s != "offset" && !named.iter().any(|n| n == *s))
+        .filter_map(|s| {
+            let (_, _, s_mse) = fit_slow_set(m, data, slow_x, &[s], u_range)?;
+            (share(&s_mse) >= MIN_EXPLAINED).then(|| CannotTell {
+                named: s.to_string(),
+                alternative: "offset".into(),
+                neither_named: true,
+                taken_out: TakenOut::InOffsetsPlace,
+                rms_v: rms_of(&s_mse),
+                alternative_rms_v: rms_of(with),
+                why: format!(
+                    "neither is named: beside the effects still named then, {s} fitted in the \
+                     place of the offset the final check took out explains {:.0} % of what is left \
+                     above the noise floor ({:.2} mV), the offset {:.0} % ({:.2} mV): the \
+                     offset's work was a shape's, not a level's, and these records do not say \
+                     which shape's; records at several held levels (the recommended protocol) \
+                     tell a scale, an offset and a curvature apart",
+                    100.0 * share(&s_mse),
+                    1e3 * rms_of(&s_mse),
+                    100.0 * share(with),
+                    1e3 * rms_of(with)
                 ),
             })
         })
@@ -1194,7 +1264,7 @@ fn diagnose_split(
                             named: r.clone(),
                             alternative: "drift".into(),
                             neither_named: false,
-                            taken_out_unshown: false,
+                            taken_out: TakenOut::No,
                             rms_v: r_rms,
                             alternative_rms_v: d_rms,
                             why: format!(
@@ -1282,7 +1352,7 @@ fn diagnose_split(
                             named: e.clone(),
                             alternative: r.clone(),
                             neither_named: true,
-                            taken_out_unshown: false,
+                            taken_out: TakenOut::No,
                             rms_v: e_rms,
                             alternative_rms_v: *r_rms,
                             why: format!(
@@ -1325,7 +1395,7 @@ fn diagnose_split(
                             named: e.clone(),
                             alternative: "drift".into(),
                             neither_named: true,
-                            taken_out_unshown: false,
+                            taken_out: TakenOut::No,
                             rms_v: e_rms,
                             alternative_rms_v: rms_of(&d.0.mse),
                             why: format!(
@@ -1670,7 +1740,7 @@ fn diagnose_split(
                     named: "hysteresis".into(),
                     alternative: "offset".into(),
                     neither_named: false,
-                    taken_out_unshown: true,
+                    taken_out: TakenOut::Unshown,
                     rms_v: rms_of(&ms),
                     alternative_rms_v: rms_of(&cur_mse),
                     why: String::new(),
@@ -1708,7 +1778,65 @@ fn diagnose_split(
                     1e3 * fitted_v,
                     1e3 * pair.alternative_rms_v
                 );
+                // A shape whose work the offset did: the other static shapes fitted in its
+                // place beside the model without it, each reported with the offset where it
+                // explains a step's share of what is left (families case 1001: a true 3.4 %
+                // scale beside a Bouc-Wen loop on a chirp; the offset won step 2 by its score,
+                // leaving half what the scale left, the final check took it out, and the
+                // scale was in no pair).
+                if pair.alternative_clearly_less() {
+                    for k in shapes_in_offsets_place(
+                        (&m, &ms, &cur_mse),
+                        &named,
+                        data,
+                        &slow_x,
+                        u_range,
+                        &var,
+                    ) {
+                        // (a pair a step already reports stays as that step gave it)
+                        if !ambiguous.iter().any(|c| {
+                            (c.named == k.named && c.alternative == k.alternative)
+                                || (c.named == k.alternative && c.alternative == k.named)
+                        }) {
+                            ambiguous.push(k);
+                        }
+                    }
+                }
                 ambiguous.push(pair);
+            }
+            // A static shape beside a table on records without holds that the final check
+            // took out below its bar, though the residual without it grew by more than a
+            // misfit of form costs: the others' refit, the table's reversible slopes along the
+            // range among them, took up most of its work, and such records cannot tell the two static maps apart (families
+            // cases 1020, 1061, 1068: a true curvature beside a Duhem or Bouc-Wen loop on one
+            // sine or chirp, taken out at 1.30-1.69x against its 1.75x bar, was in no pair).
+            if unit.len() == 1
+                && STATIC_SHAPES.contains(&e.as_str())
+                && e != "offset"
+                && named.iter().any(|n| n == "hysteresis")
+                && !data.iter().any(Data::has_hold)
+                && ratio >= CANNOT_TELL_RATIO
+            {
+                ambiguous.push(CannotTell {
+                    named: "hysteresis".into(),
+                    alternative: e.clone(),
+                    neither_named: false,
+                    taken_out: TakenOut::BelowBar,
+                    rms_v: rms_of(&ms),
+                    alternative_rms_v: rms_of(&cur_mse),
+                    why: format!(
+                        "{e} fitted beside the hysteresis table leaves {:.2} mV; taken out, the \
+                         others' refit, the table's among them, takes up most of its work ({:.2} \
+                         mV: the residual above the noise floor grows {ratio:.2}x, more than the {CANNOT_TELL_RATIO}x a \
+                         misfit of form costs, but under the {bar_e:.2}x its parameters must \
+                         earn): without holds, the table's reversible slopes along the range \
+                         make a static map as {e} does, and the records cannot tell which; \
+                         records at several held levels (the recommended protocol) tell a static \
+                         map from the loop's",
+                        1e3 * rms_of(&cur_mse),
+                        1e3 * rms_of(&ms)
+                    ),
+                });
             }
             steps.push(Step {
                 removed: true,
@@ -2056,7 +2184,7 @@ fn diagnose_split(
                 named: "hysteresis".into(),
                 alternative: "offset".into(),
                 neither_named: false,
-                taken_out_unshown: false,
+                taken_out: TakenOut::No,
                 rms_v,
                 alternative_rms_v: with_rms_v,
                 why: format!(
@@ -2080,9 +2208,11 @@ fn diagnose_split(
             !named.contains(&c.named) && !named.contains(&c.alternative)
         } else {
             // (a drift that gave way to a shape a later look-alike step dropped: that step's
-            // own pair says so)
+            // own pair says so; a pair the final check made beside a table the final check
+            // took out later no longer stands)
             !named.contains(&c.alternative)
                 && (c.alternative != "drift" || named.contains(&c.named))
+                && (c.taken_out == TakenOut::No || named.contains(&c.named))
         }
     });
     cannot_tell.extend(ambiguous);
@@ -2194,7 +2324,7 @@ fn diagnose_split(
             named: "hysteresis".into(),
             alternative: "offset".into(),
             neither_named: false,
-            taken_out_unshown: false,
+            taken_out: TakenOut::No,
             rms_v: rms_of(&cur_mse),
             alternative_rms_v: rms_of(&mse_with),
             why: format!(
