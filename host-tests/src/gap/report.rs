@@ -184,12 +184,18 @@ pub(super) fn unexplained_words(final_rms_v: f64, pairs: &[CannotTell]) -> Strin
         .filter(|k| k.taken_out == TakenOut::InOffsetsPlace)
         .map(|k| k.named.clone())
         .collect();
-    let in_place_words = format!(
-        "{} fitted in its place each explain a step's share of what was left, and the records \
-         do not say which shape's work it did, if any (the pairs above), so none of them is \
-         named",
-        in_place.join(" and ")
-    );
+    let in_place_words = match in_place.as_slice() {
+        [one] => format!(
+            "{one} fitted in its place explains a step's share of what was left, and the records \
+             do not say whether the offset did its work (the pair above), so neither is named"
+        ),
+        _ => format!(
+            "{} fitted in its place each explain a step's share of what was left, and the \
+             records do not say which shape's work it did, if any (the pairs above), so none \
+             of them is named",
+            in_place.join(" and ")
+        ),
+    };
     let alike_words = |opening: &str| {
         format!(
             "{opening}the look-alikes {} explain part of it alike and the records cannot tell \
@@ -692,7 +698,7 @@ mod tests {
         };
         let w = unexplained_words(final_v, &[taken, in_its_place.clone()]);
         assert!(
-            w.contains("(the hysteresis / offset pair above); sensor-gain fitted in its place each explain a step's share"),
+            w.contains("(the hysteresis / offset pair above); sensor-gain fitted in its place explains a step's share"),
             "{w}"
         );
         let w = unexplained_words(final_v, &[changed_since, in_its_place]);
