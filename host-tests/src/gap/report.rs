@@ -204,7 +204,7 @@ pub(super) fn unexplained_words(final_rms_v: f64, pairs: &[CannotTell]) -> Strin
         )
     };
     // Static shapes the final check took out below their bars beside a table: each took part
-    // of it, and the table's refit took up most of the same work.
+    // of it, and the others' refit (the table's among them) took up most of the same work.
     let below_bar: Vec<String> = pairs
         .iter()
         .filter(|c| c.taken_out == TakenOut::BelowBar)

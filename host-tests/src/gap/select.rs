@@ -677,8 +677,8 @@ fn shapes_in_offsets_place(
                 alternative_rms_v: rms_of(with),
                 why: format!(
                     "neither is named: beside the effects still named then, {s} fitted in the \
-                     place of the offset the final check took out explains {:.0} % of what is left \
-                     above the noise floor ({:.2} mV), the offset {:.0} % ({:.2} mV): the \
+                     place of the offset the final check took out explains {:.0} % of what is \
+                     left above the noise floor ({:.2} mV), the offset {:.0} % ({:.2} mV): the \
                      offset's work was a shape's, not a level's, and these records do not say \
                      which shape's; records at several held levels (the recommended protocol) \
                      tell a scale, an offset and a curvature apart",
@@ -1807,9 +1807,10 @@ fn diagnose_split(
             // A static shape beside a table on records without holds that the final check
             // took out below its bar, though the residual without it grew by more than a
             // misfit of form costs: the others' refit, the table's reversible slopes along the
-            // range among them, took up most of its work, and such records cannot tell the two static maps apart (families
-            // cases 1020, 1061, 1068: a true curvature beside a Duhem or Bouc-Wen loop on one
-            // sine or chirp, taken out at 1.30-1.69x against its 1.75x bar, was in no pair).
+            // range among them, took up most of its work, and such records cannot tell the two
+            // static maps apart (families cases 1020, 1061, 1068: a true curvature beside a
+            // Duhem or Bouc-Wen loop on one sine or chirp, taken out at 1.30-1.69x against its
+            // 1.75x bar, was in no pair).
             if unit.len() == 1
                 && STATIC_SHAPES.contains(&e.as_str())
                 && e != "offset"
@@ -1826,13 +1827,13 @@ fn diagnose_split(
                     alternative_rms_v: rms_of(&cur_mse),
                     why: format!(
                         "{e} fitted beside the hysteresis table leaves {:.2} mV; taken out, the \
-                         others' refit, the table's among them, takes up most of its work ({:.2} \
-                         mV: the residual above the noise floor grows {ratio:.2}x, more than the {CANNOT_TELL_RATIO}x a \
-                         misfit of form costs, but under the {bar_e:.2}x its parameters must \
-                         earn): without holds, the table's reversible slopes along the range \
-                         make a static map as {e} does, and the records cannot tell which; \
-                         records at several held levels (the recommended protocol) tell a static \
-                         map from the loop's",
+                         others' refit, the table's among them, takes up most of its work \
+                         ({:.2} mV: the residual above the noise floor grows {ratio:.2}x, more \
+                         than the {CANNOT_TELL_RATIO}x a misfit of form costs, but under the \
+                         {bar_e:.2}x its parameters must earn): without holds, the table's \
+                         reversible slopes along the range make a static map as {e} does, and \
+                         the records cannot tell which; records at several held levels (the \
+                         recommended protocol) tell a static map from the loop's",
                         1e3 * rms_of(&cur_mse),
                         1e3 * rms_of(&ms)
                     ),
