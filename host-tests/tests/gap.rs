@@ -1625,12 +1625,14 @@ fn mains_hum_is_the_measurements_not_the_stages() {
     assert_thesis_stage_with_offset_named("mains hum", &d.named, ratio, fitted_v, offset_v);
 }
 
-/// Four slips a real record's maker makes, refused with words that say which: a time column
+/// Five slips a real record's maker makes, refused with words that say which: a time column
 /// in milliseconds (the record reads 1000 times slower than the 1 kHz the workflow needs, and
 /// the refusal names the rate it would have in seconds), a sensor wired with its sign
 /// reversed (the output moves against the model's, correlation -1: named as such, not
 /// diagnosed as thousands of floors of unexplained residual as before), an output in
-/// millivolts (1000 times the model's: before, an error that a figure came out as NaN), and
+/// millivolts (1000 times the model's: before, an error that a figure came out as NaN), the
+/// amplifier's monitor logged as the input (10x the command, beyond the amplifier's input
+/// range: the words ask about u too), and
 /// the input and output columns swapped (the sensor's noisy reading as the input, the exact
 /// command as the output: before, a `sensor-gain` of 1.60, an `amplifier-pole` and a
 /// `time-delay` at 115x the floor).
@@ -1663,7 +1665,27 @@ fn a_record_in_milliseconds_or_with_a_reversed_sign_is_refused_clearly() {
         err.contains("mv.csv")
             && err.contains("1000.0")
             && err.contains("times as far")
-            && err.contains("other units"),
+            && err.contains("other units")
+            && !err.contains("Its input u spans"),
+        "{err}"
+    );
+    // The amplifier's monitor logged as the input: 10x the command, beyond what the
+    // amplifier accepts; the model then moves 10x as far as the record, and the words ask
+    // about u as well as y.
+    let monitor: Vec<f64> = u.iter().map(|v| 10.0 * v).collect();
+    let data = vec![
+        Data::from_record(
+            "monitor.csv",
+            Record::new(t.clone(), monitor, Some(y.clone()), None).unwrap(),
+        )
+        .unwrap(),
+    ];
+    let err = refusal(&truth, &data);
+    assert!(
+        err.contains("monitor.csv")
+            && err.contains("times as far")
+            && err.contains("beyond the amplifier's input range")
+            && err.contains("amplifier's output"),
         "{err}"
     );
     let swapped = vec![

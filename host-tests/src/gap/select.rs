@@ -1018,12 +1018,28 @@ pub fn diagnose(base: &ModelFile, data: &[Data], opts: &Options) -> anyhow::Resu
         if let Some(k) = scale_apart(&d.y_v, s, *f) {
             let (ylo, yhi) = min_max(&d.y_v);
             let (slo, shi) = min_max(s);
+            // (a lab that logs the amplifier's monitor, 10x its input, as u: the input then
+            // spans beyond what the amplifier accepts, which the words say)
+            let (ulo, uhi) = min_max(&d.u_v);
+            let input = if ulo < model_core::params::AMP_INPUT_MIN_V
+                || uhi > model_core::params::AMP_INPUT_MAX_V
+            {
+                format!(
+                    " Its input u spans {ulo:.2} to {uhi:.2} V, beyond the amplifier's input \
+                     range ({} to {} V): is u the amplifier's output (its input times the \
+                     gain) or in other units?",
+                    model_core::params::AMP_INPUT_MIN_V,
+                    model_core::params::AMP_INPUT_MAX_V
+                )
+            } else {
+                String::new()
+            };
             bail!(
                 "record {}: its output moves {} times as far as the model's (the slope of y on \
                  the model's simulated output; y spans {:.4} to {:.4} V, the model's output \
                  {:.4} to {:.4} V): is y in other units (mV, um, nm), or is the model not this \
-                 stage's? The workflow names small departures from the model; a scale error \
-                 within {SCALE_APART_MAX}x is its `sensor-gain`",
+                 stage's?{input} The workflow names small departures from the model; a scale \
+                 error within {SCALE_APART_MAX}x is its `sensor-gain`",
                 d.name,
                 if k >= 1.0 {
                     format!("{k:.3}")
