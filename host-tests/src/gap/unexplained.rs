@@ -17,7 +17,11 @@
 //!   window over up to 2^16 samples) and the share of the residual power within 10 % of it,
 //!   with what drives it where the input has no power there ([`UNDRIVEN_SHARE`]): a harmonic
 //!   of the input's own line, or a line the input does not drive, on a mains frequency
-//!   (interference in the measurement?) or not.
+//!   (interference in the measurement?) or not;
+//! * **along the input's stretches** (since session 42): where the reading runs against its
+//!   input, along a stretch where the input only rises or only falls, by
+//!   [`BACKWARDS_FLOORS`] floors more than the model's response does: a loop whose branches
+//!   run backwards (a Duhem or Bouc-Wen form can), which no Everett table follows.
 //!
 //! `rms_v` is the residual RMS with the noise floor (or that noise, where it set the bar)
 //! taken out in quadrature, the root of the mean over records of `max(MSE_r - floor_r^2, 0)`:
@@ -82,6 +86,9 @@ pub fn locate(
                 ms.sqrt() / f.max(1e-12),
                 describe(d, &r)
             ));
+            if let Some(w) = backwards(d, y, floor) {
+                parts.push(w);
+            }
         }
     }
     if parts.is_empty() {
@@ -155,6 +162,129 @@ fn describe(d: &Data, r: &[f64]) -> String {
         ));
     }
     format!("{time}; {input}; {}", line(r, &d.u_v, d.period_s()))
+}
+
+/// Samples in the moving mean through which the unexplained part reads a record's reading and
+/// input for a loop whose branches run backwards (`backwards`)
+/// (our assumption: the noise of a mean of 32 samples is 0.18 of the floor, and a loop's
+/// branch spans hundreds of samples on the slowest record a lab makes at 1 kHz).
+pub const BACKWARDS_WINDOW: usize = 32;
+
+/// How far, in noise floors, a record's reading must run against its input beyond what the
+/// model's own response does, along one monotone stretch of the input, for `backwards` to
+/// say so (our assumption: the difference of two 32-sample means has a noise of 0.25 of the
+/// floor, so 5 floors is 20 of its standard deviations).
+pub const BACKWARDS_FLOORS: f64 = 5.0;
+
+/// Where the reading of record `d` runs against its input, along a stretch where the input
+/// only rises (or only falls), by [`BACKWARDS_FLOORS`] noise floors more than the model's
+/// simulated output `sim` does there (its drift): a loop whose branches run backwards, which
+/// no Everett table follows (its output rises with its input on every branch). Read through
+/// moving means of [`BACKWARDS_WINDOW`] samples; stretches shorter than four windows, those
+/// where the model's own response runs against the input by as much (a fast stretch its
+/// dynamics bend), and the record's first (its start) are not read. `None` where nothing runs
+/// so.
+fn backwards(d: &Data, sim: &[f64], floor: f64) -> Option<String> {
+    let w = BACKWARDS_WINDOW;
+    let n = d.len().min(sim.len());
+    if n < 4 * w {
+        return None;
+    }
+    let mean = |x: &[f64]| -> Vec<f64> {
+        let mut acc = 0.0;
+        let mut out = Vec::with_capacity(n + 1 - w);
+        for (i, v) in x[..n].iter().enumerate() {
+            acc += v;
+            if i >= w {
+                acc -= x[i - w];
+            }
+            if i + 1 >= w {
+                out.push(acc / w as f64);
+            }
+        }
+        out
+    };
+    let (u, y, m) = (mean(&d.u_v), mean(&d.y_v), mean(sim));
+    // Monotone stretches of the smoothed input: (first, end, rising).
+    let mut stretches: Vec<(usize, usize, bool)> = Vec::new();
+    let mut start = 0;
+    let mut dir: Option<bool> = None;
+    for i in 1..u.len() {
+        let step = u[i] - u[i - 1];
+        if step == 0.0 {
+            continue;
+        }
+        let rising = step > 0.0;
+        match dir {
+            Some(r) if r != rising => {
+                stretches.push((start, i, r));
+                start = i - 1;
+                dir = Some(rising);
+            }
+            None => dir = Some(rising),
+            _ => {}
+        }
+    }
+    if let Some(r) = dir {
+        stretches.push((start, u.len(), r));
+    }
+    // The largest run against the input along each stretch (a fall after the highest
+    // reading so far while the input rises), the model's own taken off.
+    let against = |x: &[f64], a: usize, b: usize, rising: bool| -> (f64, usize) {
+        let sign = if rising { 1.0 } else { -1.0 };
+        let mut best = f64::NEG_INFINITY;
+        let (mut most, mut at) = (0.0, a);
+        for (i, v) in x[a..b].iter().enumerate() {
+            best = best.max(sign * v);
+            if best - sign * v > most {
+                (most, at) = (best - sign * v, a + i);
+            }
+        }
+        (most, at)
+    };
+    let worst = stretches
+        .iter()
+        .filter(|(a, b, _)| b - a >= 4 * w)
+        .map(|&(a, b, rising)| {
+            let (dy, at) = against(&y, a, b, rising);
+            let (dm, _) = against(&m, a, b, rising);
+            (dy - dm, dy, a, b, at, rising, dm)
+        })
+        // (a stretch whose model response itself runs against the input, a fast one its
+        // dynamics bend, is not read: there a misfit of the dynamics runs so too; nor the
+        // first, which holds the record's start, where a stage may still be settling from
+        // before it: families case 1043, a Preisach plane, 72 mV within 17 ms of its start)
+        .filter(|x| x.0.is_finite() && x.6 <= BACKWARDS_FLOORS * floor && x.2 > 0)
+        .map(|(e, dy, a, b, at, rising, _)| (e, dy, a, b, at, rising))
+        .fold(
+            None,
+            |acc: Option<(f64, f64, usize, usize, usize, bool)>, x| match acc {
+                Some(a) if a.0 >= x.0 => Some(a),
+                _ => Some(x),
+            },
+        )?;
+    let (excess, dy, a, b, at, rising) = worst;
+    if excess <= BACKWARDS_FLOORS * floor {
+        return None;
+    }
+    // (the means lag their samples by half a window)
+    let t = |i: usize| d.t_s[(i + w / 2).min(n - 1)];
+    Some(format!(
+        "{}: while its input {} from {:.2} to {:.2} V (t = {:.3}-{:.3} s), its reading \
+         runs {:.2} mV against it by t = {:.3} s, {:.1}x its floor more than the model's \
+         response does: a loop whose branches run backwards there, which no Everett table \
+         follows (the table's output moves with its input on every branch; a Duhem or \
+         Bouc-Wen loop can), or an effect the final model lacks (a creep it does not hold?)",
+        d.name,
+        if rising { "rises" } else { "falls" },
+        u[a],
+        u[b - 1],
+        t(a),
+        t(b - 1),
+        1e3 * dy,
+        t(at),
+        excess / floor.max(1e-12)
+    ))
 }
 
 /// Share of the input's varying power near a residual line below which the input does not
@@ -282,6 +412,77 @@ fn line(r: &[f64], u: &[f64], t: f64) -> String {
 mod tests {
     use super::*;
     use crate::io::csv::Record;
+
+    /// A loop whose falling branch runs backwards is said, one whose branches follow the
+    /// input is not, and neither is a run against the input that the model's own response
+    /// makes too (its dynamics on a fast stretch). 10 s at 5 kHz of a 1 Hz sine over
+    /// 0.5-9.5 V, a model (`sim`) that follows it as a straight line, 1 mV of noise.
+    #[test]
+    fn a_loop_whose_branches_run_backwards_is_said() {
+        let n = 50_000;
+        let t: Vec<f64> = (0..n).map(|i| i as f64 / 5e3).collect();
+        let u: Vec<f64> = t
+            .iter()
+            .map(|x| 5.0 - 4.5 * (std::f64::consts::TAU * x).cos())
+            .collect();
+        let noise = crate::testing::filtered_noise(n, 5e3, 0.0, 0, 7);
+        let floor = 1e-3;
+        let sim: Vec<f64> = u.iter().map(|x| 0.79 * x).collect();
+        let record = |loop_v: &dyn Fn(f64, f64) -> f64| {
+            let y: Vec<f64> = (0..n)
+                .map(|i| {
+                    let du = if i > 0 { u[i] - u[i - 1] } else { 0.0 };
+                    sim[i] + loop_v(u[i], du) + floor * noise[i]
+                })
+                .collect();
+            Data::from_record(
+                "r.csv",
+                Record::new(t.clone(), u.clone(), Some(y), None).unwrap(),
+            )
+            .unwrap()
+        };
+        // A loop term of up to +-40 mV that closes at the sine's ends (a Preisach loop's
+        // branches meet at its turning points), whose falling branch has a bump of 0.5 V
+        // around 5 V, steep enough (1.7 V/V at most) to beat the stage's 0.79 V/V: the reading
+        // runs against the falling input there, by about 0.3 V.
+        let width = |x: f64| 0.04 * (std::f64::consts::PI * (x - 0.5) / 9.0).sin();
+        let bump = |x: f64| 0.5 * (-((x - 5.0) / 0.25).powi(2)).exp();
+        let back = record(&|x, du| {
+            if du < 0.0 {
+                width(x) - bump(x)
+            } else {
+                -width(x)
+            }
+        });
+        let said = backwards(&back, &sim, floor).expect("a backwards branch");
+        assert!(
+            said.contains("falls") && said.contains("branches run backwards"),
+            "{said}"
+        );
+        // The same loop with a bump of 0.15 V (0.52 V/V at most): its branches still follow
+        // the input.
+        let fwd = record(&|x, du| {
+            if du < 0.0 {
+                width(x) - 0.3 * bump(x)
+            } else {
+                -width(x)
+            }
+        });
+        assert_eq!(backwards(&fwd, &sim, floor), None);
+        // A run against the input in the record that the model makes too is not said.
+        let sim_back: Vec<f64> = (0..n)
+            .map(|i| {
+                let du = if i > 0 { u[i] - u[i - 1] } else { 0.0 };
+                sim[i]
+                    + if du < 0.0 {
+                        width(u[i]) - bump(u[i])
+                    } else {
+                        -width(u[i])
+                    }
+            })
+            .collect();
+        assert_eq!(backwards(&back, &sim_back, floor), None);
+    }
 
     /// 10 s at 5 kHz of a 1 Hz sine input (plus a 0.2 V line at `extra_hz` where given), a
     /// model that follows it exactly, and records with a 3 mV line at `line_hz` added: the
