@@ -86,7 +86,9 @@ pub fn locate(
                 ms.sqrt() / f.max(1e-12),
                 describe(d, &r)
             ));
-            if let Some(w) = backwards(d, y, floor) {
+            // (against the noise the record is judged against: a sensor's low-frequency
+            // noise, where it set the bar, is not averaged down by the means)
+            if let Some(w) = backwards(d, y, f) {
                 parts.push(w);
             }
         }
