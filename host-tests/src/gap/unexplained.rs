@@ -429,7 +429,8 @@ mod tests {
             .collect();
         let noise = crate::testing::filtered_noise(n, 5e3, 0.0, 0, 7);
         let floor = 1e-3;
-        let sim: Vec<f64> = u.iter().map(|x| 0.79 * x).collect();
+        let gain = model_core::params::PLANT_GAIN;
+        let sim: Vec<f64> = u.iter().map(|x| gain * x).collect();
         let record = |loop_v: &dyn Fn(f64, f64) -> f64| {
             let y: Vec<f64> = (0..n)
                 .map(|i| {
@@ -445,7 +446,7 @@ mod tests {
         };
         // A loop term of up to +-40 mV that closes at the sine's ends (a Preisach loop's
         // branches meet at its turning points), whose falling branch has a bump of 0.5 V
-        // around 5 V, steep enough (1.7 V/V at most) to beat the stage's 0.79 V/V: the reading
+        // around 5 V, steep enough (1.7 V/V at most) to beat the stage's static gain (0.79 V/V): the reading
         // runs against the falling input there, by about 0.3 V.
         let width = |x: f64| 0.04 * (std::f64::consts::PI * (x - 0.5) / 9.0).sin();
         let bump = |x: f64| 0.5 * (-((x - 5.0) / 0.25).powi(2)).exp();
