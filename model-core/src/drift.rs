@@ -152,7 +152,7 @@ impl DriftConfig {
 /// The discrete drift branch: configuration half (`Copy`, `f32`).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Drift {
-    lags: [FirstOrderLag; 3],
+    pub(crate) lags: [FirstOrderLag; 3],
     poly: [f32; 4],
     lo_v: f32,
     hi_v: f32,
@@ -161,7 +161,7 @@ pub struct Drift {
 /// The drift branch's history: the three lag outputs.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct DriftState {
-    y: [Accumulator; 3],
+    pub(crate) y: [Accumulator; 3],
 }
 
 impl Drift {

@@ -48,6 +48,7 @@ pub mod discretize;
 pub mod drift;
 pub mod frame;
 pub mod gain;
+pub mod held;
 pub mod hysteresis;
 pub mod lag;
 pub mod learning;

@@ -126,6 +126,16 @@ impl LinearPlant {
         self.delay_samples
     }
 
+    /// The coefficients as a held stretch's closed form reads them ([`crate::held`]).
+    pub(crate) fn section(&self) -> crate::held::Section<'_, 3> {
+        crate::held::Section {
+            phi: &self.phi,
+            gamma_new: &self.gamma_new,
+            gamma_old: &self.gamma_old,
+            delay_samples: self.delay_samples,
+        }
+    }
+
     /// A state at rest with the input held at `u_v` forever (output `gain * u_v`).
     pub fn steady_state(&self, u_v: f32) -> PlantState {
         PlantState {
@@ -164,9 +174,20 @@ impl LinearPlant {
 /// The plant's history: three states and the delay line.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct PlantState {
-    x: [f32; 3],
-    line: [f32; MAX_DELAY_SAMPLES],
-    head: usize,
+    pub(crate) x: [f32; 3],
+    pub(crate) line: [f32; MAX_DELAY_SAMPLES],
+    pub(crate) head: usize,
+}
+
+impl PlantState {
+    /// The state as a held stretch's closed form advances it ([`crate::held`]).
+    pub(crate) fn section(&mut self) -> crate::held::SectionState<'_, 3, MAX_DELAY_SAMPLES> {
+        crate::held::SectionState {
+            x: &mut self.x,
+            line: &mut self.line,
+            head: &mut self.head,
+        }
+    }
 }
 
 impl Default for PlantState {

@@ -155,6 +155,21 @@ impl Accumulator {
     pub fn set(&mut self, value: f32) {
         *self = Self::new(value);
     }
+
+    /// The sum carried to `f64`: `hi` less the error `lo` it holds too much.
+    pub fn exact(&self) -> f64 {
+        self.hi as f64 - self.lo as f64
+    }
+
+    /// An accumulator holding `value` as nearly as `hi` and `lo` can (`hi` the nearest
+    /// `f32`, `lo` what it holds too much).
+    pub fn from_exact(value: f64) -> Self {
+        let hi = value as f32;
+        Self {
+            hi,
+            lo: (hi as f64 - value) as f32,
+        }
+    }
 }
 
 /// Where a section keeps its output: a plain `f32`, or an [`Accumulator`] where the pole sits

@@ -6,7 +6,12 @@
 //! `y` at each record time is the sensor reading of the last stage step at or before that time.
 //! The stage starts at rest with the first input held for ever (drift settled). `piezo simulate`
 //! writes the columns `t,u,y` at the input's sample times.
+//!
+//! A hold is stepped to the fast part's fixed point and taken from there in closed form
+//! ([`model_core::held`]): a 1 kHz record holds each input for 50 stage steps, and stepping
+//! them one by one was a quarter of the model-gap workflow's time.
 
+use model_core::held::HeldMap;
 use model_core::stage::Stage;
 
 /// The stage's readings at the times `t_s` for the input `u_v` held between samples.
@@ -48,6 +53,7 @@ pub fn simulate_after_while(
     let t0 = t_s[0];
     let mut s = stage.steady_state_after(history_v, u_v[0] as f32);
     let mut last = s.signals().measured_v;
+    let mut maps = HeldMaps::default();
     // Steps taken so far; step k ends at t0 + k T.
     let mut k: u64 = 0;
     for i in 0..n {
@@ -61,11 +67,14 @@ pub fn simulate_after_while(
             .floor()
             .max(0.0) as u64;
         let held = if i == 0 { u_v[0] } else { u_v[i - 1] } as f32;
-        // The steps of one hold at once (`Stage::step_held`: the same readings as step by
-        // step, to the bit); at most 2^32 - 1 a call, so a longer hold takes several.
+        // The steps of one hold at once: whole steps to the fast part's fixed point
+        // (`Stage::settle_held`), the rest in closed form (`Stage::finish_held` with the map
+        // of that many steps: within half an f32 step of an f64 reference, where stepping in
+        // f32 rounds at every step); at most 2^32 - 1 a call, so a longer hold takes several.
         while k < until {
             let steps = (until - k).min(u32::MAX as u64) as u32;
-            last = stage.step_held(&mut s, held, steps);
+            let left = stage.settle_held(&mut s, held, steps);
+            last = stage.finish_held(&mut s, left, maps.get(stage, left));
             k += steps as u64;
         }
         if !go_on(i, last as f64) {
@@ -74,6 +83,36 @@ pub fn simulate_after_while(
         y.push(last as f64);
     }
     Some(y)
+}
+
+/// The closed forms of the holds one simulation meets, by their length (a record at a steady
+/// rate meets a handful). Bounded: at most [`HeldMaps::MAX_MAPS`] lengths, each at most
+/// [`HeldMaps::MAX_STEPS`] steps (a map costs its length in small products to build); other
+/// holds are stepped.
+#[derive(Default)]
+struct HeldMaps {
+    maps: std::collections::HashMap<u32, Option<HeldMap>>,
+}
+
+impl HeldMaps {
+    /// Lengths kept (our assumption: a record's clock jitters over a few lengths at most).
+    const MAX_MAPS: usize = 64;
+    /// The longest hold put in closed form: 1 s at 50 kHz (a 1 Hz record).
+    const MAX_STEPS: u32 = 50_000;
+
+    /// The map of `left` steps, built on first use.
+    fn get(&mut self, stage: &Stage, left: u32) -> Option<&HeldMap> {
+        if left == 0 || left > Self::MAX_STEPS {
+            return None;
+        }
+        if !self.maps.contains_key(&left) && self.maps.len() >= Self::MAX_MAPS {
+            return None;
+        }
+        self.maps
+            .entry(left)
+            .or_insert_with(|| stage.held_map(left))
+            .as_ref()
+    }
 }
 
 #[cfg(test)]
