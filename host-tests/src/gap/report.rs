@@ -85,9 +85,9 @@ impl Diagnosis {
                 s.push_str(&format!(
                     "hysteresis basis: the two splits' loops alone were within {CANNOT_TELL_RATIO}x \
                      (RMS) of each other, so both diagnoses ran and the one explaining every \
-                     record where only one did, else the one naming fewer effects (then ending \
-                     lower), was kept; the {} split's diagnosis named [{}] and ended at {} \
-                     noise variances\n",
+                     record where only one did, else the one naming fewer effects (a drift \
+                     the holds' tails show not counted; then ending lower), was kept; the {} \
+                     split's diagnosis named [{}] and ended at {} noise variances\n",
                     r.split.describe().0,
                     r.named.join(", "),
                     fmt_num(r.final_noise_var)
