@@ -27,6 +27,8 @@
 //! * [`reference`](mod@reference): reference generators (step, ramp, sine, triangle, square, sweep) with preview.
 //! * [`drift`], [`gain`], [`amplifier`], [`sensor`]: the non-linear blocks of ch. 5.
 //! * [`stage`]: the ch. 6 overall model composed of all blocks (the wiring is stated there).
+//! * [`held`]: a held input's steps past the stage's fast fixed point in closed form (the
+//!   host's simulations of slow records; not the 50 kHz path).
 //! * [`frame`]: the capture wire format (firmware encoder, host decoder).
 //! * [`learning`]: iterative learning control over the generator's repeat (the table the
 //!   interrupt reads, the update a task runs once per repeat).
