@@ -141,6 +141,22 @@ fn semicolon_and_tab_separated_records_read_with_decimal_commas() {
     assert!(e.contains("line 2"), "{e}");
     let e = err("t,u,y\nNA,NA,NA\n0,0.5,0.25\n");
     assert!(e.contains("line 2"), "{e}");
+    // Every field in double quotes (a spreadsheet's or a data frame's "quote all"), with
+    // points, with decimal commas under semicolons, or under commas (inside the quotes).
+    let quoted = Record::parse(
+        "\"t\",\"u\",\"y\"\n\"0\",\"0.5\",\"0.25\"\n\"0.001\",\"1.5\",\"-0.75\"\n\"0.002\",\"2\",\"1e-3\"\n",
+    );
+    assert_eq!(quoted.unwrap(), commas);
+    let quoted = Record::parse(
+        "\"t\";\"u\";\"y\"\n\"0\";\"0,5\";\"0,25\"\n\"0,001\";\"1,5\";\"-0,75\"\n\"0,002\";\"2\";\"1e-3\"\n",
+    );
+    assert_eq!(quoted.unwrap(), commas);
+    let quoted =
+        Record::parse("t,u,y\n0,\"0,5\",\"0,25\"\n\"0,001\",\"1,5\",-0.75\n0.002,2,1e-3\n");
+    assert_eq!(quoted.unwrap(), commas);
+    // Quotes that do not close leave the line's fields unsplit after them: refused by count.
+    let e = err("t,u,y\n0,\"0.5,0.25\n");
+    assert!(e.contains("line 2") && e.contains("fields"), "{e}");
 }
 
 #[test]

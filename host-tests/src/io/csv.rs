@@ -19,7 +19,8 @@
 //!
 //! Columns are separated by commas (or, when the header has no comma, by semicolons or tabs,
 //! as spreadsheets in decimal-comma locales export them; a decimal comma is then read as a
-//! point), surrounding spaces are trimmed, blank lines are skipped,
+//! point), surrounding spaces and double quotes are trimmed (a separator inside quotes is the
+//! field's: `"0,5"` under commas is a decimal comma), blank lines are skipped,
 //! a UTF-8 byte-order mark at the start is ignored. Every failure is a [`RecordError`] naming
 //! where (the line of a CSV file, the element of a column handed to [`Record::new`], e.g. from
 //! a `.mat` file) and the problem: a missing column, a field that is not a number, NaN or
@@ -283,13 +284,35 @@ pub fn separator(header: &str) -> char {
     }
 }
 
-/// A line's fields under separator `sep` (a space: any run of blanks), trimmed.
+/// A line's fields under separator `sep` (a space: any run of blanks), trimmed, each without
+/// the double quotes around it (`"0.5"`, as spreadsheets and data frames write every field
+/// when asked to quote): a separator inside quotes belongs to the field (`"0,5"`, a decimal
+/// comma under commas).
 fn fields_of(s: &str, sep: char) -> Vec<&str> {
     if sep == ' ' {
-        s.split_whitespace().collect()
-    } else {
-        s.split(sep).map(str::trim).collect()
+        return s.split_whitespace().map(unquote).collect();
     }
+    let mut out = Vec::new();
+    let mut start = 0;
+    let mut quoted = false;
+    for (i, c) in s.char_indices() {
+        if c == '"' {
+            quoted = !quoted;
+        } else if c == sep && !quoted {
+            out.push(unquote(s.get(start..i).unwrap_or("")));
+            start = i + c.len_utf8();
+        }
+    }
+    out.push(unquote(s.get(start..).unwrap_or("")));
+    out
+}
+
+/// A field trimmed, and without the double quotes around it if it has them.
+fn unquote(f: &str) -> &str {
+    let f = f.trim();
+    f.strip_prefix('"')
+        .and_then(|g| g.strip_suffix('"'))
+        .map_or(f, str::trim)
 }
 
 /// A units row's field: text with a letter in it that is no number and no missing value's
@@ -303,10 +326,10 @@ fn is_unit(f: &str) -> bool {
         && !["na", "nan", "null", "none", "n/a", "inf"].contains(&bare.as_str())
 }
 
-/// A field as a number: a decimal comma is read as a point where the separator is not a
-/// comma.
-fn number_of(text: &str, sep: char) -> Option<f64> {
-    if sep != ',' && text.contains(',') {
+/// A field as a number: a decimal comma is read as a point (a field holds a comma only where
+/// the separator is not one, or inside quotes).
+fn number_of(text: &str) -> Option<f64> {
+    if text.contains(',') {
         text.replacen(',', ".", 1).parse().ok()
     } else {
         text.parse().ok()
@@ -535,12 +558,11 @@ impl Record {
                         let Some(idx) = *idx else { continue };
                         let text = fields.get(idx).copied().unwrap_or("");
                         let column = names.get(idx).cloned().unwrap_or_default();
-                        let v: f64 =
-                            number_of(text, sep).ok_or_else(|| RecordError::NotANumber {
-                                line,
-                                column: column.clone(),
-                                text: truncate(text),
-                            })?;
+                        let v: f64 = number_of(text).ok_or_else(|| RecordError::NotANumber {
+                            line,
+                            column: column.clone(),
+                            text: truncate(text),
+                        })?;
                         if !v.is_finite() {
                             return Err(RecordError::NotFinite {
                                 at: At::Line(line),
