@@ -22,9 +22,15 @@ struct Run {
 
 /// Run `piezo` with `args`, killed after `limit` (then `code` is `None`).
 fn piezo(args: &[&str], limit: Duration) -> Run {
+    piezo_env(args, &[], limit)
+}
+
+/// [`piezo`] with environment variables set for the child.
+fn piezo_env(args: &[&str], env: &[(&str, &str)], limit: Duration) -> Run {
     let start = Instant::now();
     let mut child = Command::new(env!("CARGO_BIN_EXE_piezo"))
         .args(args)
+        .envs(env.iter().copied())
         .stdout(Stdio::piped())
         .stderr(Stdio::piped())
         .spawn()
@@ -160,7 +166,8 @@ fn simulate_on_samples_far_apart_is_refused_up_front() {
 }
 
 /// Samples 10 s apart are refused up front by their rate (the workflow reads 1 kHz or
-/// faster); a 1 kHz record of 500 s, by the work it would take.
+/// faster); a 1 kHz record of 500 s, by the work it would take under a `PIEZO_MAX_STEPS`
+/// below it (without the setting it runs: its holds are taken in closed form).
 #[test]
 fn gap_on_samples_far_apart_is_refused_up_front() {
     let d = dir("gapfar");
@@ -172,10 +179,16 @@ fn gap_on_samples_far_apart_is_refused_up_front() {
     );
     let long = d.join("long.csv");
     write(&long, &csv(500_000, 1e-3, 5.0, 1.0));
-    refused(
-        &["gap", "--model", "thesis-linear", "--data", s(&long)],
-        "PIEZO_MAX_STEPS",
+    let args = ["gap", "--model", "thesis-linear", "--data", s(&long)];
+    let r = piezo_env(&args, &[(checks::MAX_STEPS_ENV, "100000000")], QUICK);
+    println!(
+        "piezo {}: {:.2} s: {}",
+        args.join(" "),
+        r.secs,
+        r.stderr.trim()
     );
+    assert_eq!(r.code, Some(2), "{}{}", r.stdout, r.stderr);
+    assert!(r.stderr.contains(checks::MAX_STEPS_ENV), "{}", r.stderr);
 }
 
 #[test]
@@ -201,10 +214,20 @@ fn gap_takes_the_recommended_protocol_without_a_setting() {
         ("id-slow.csv".to_string(), 150_000, 150.0),
     ];
     checks::bound_gap(&standard, 2e-5).expect("the recommended protocol runs");
-    // ... and a record three times the longest the bound admits does not.
-    let long = vec![("long.csv".to_string(), 600_000, 1200.0)];
-    let e = checks::bound_gap(&long, 2e-5).unwrap_err().to_string();
+    // ... and so does a lab's 20-minute creep record at 1 kHz (its holds in closed form, eight
+    // steps' work a sample: 9.6e8 over the run, against 2e9), which the stage-step count
+    // refused before session 43 (6e7 steps a pass).
+    let long = vec![("long.csv".to_string(), 1_200_000, 1200.0)];
+    checks::bound_gap(&long, 2e-5).expect("a 20-minute record at 1 kHz runs");
+    // Under a bound below its work it is refused, with the setting named.
+    let e = checks::bound_gap_within(&long, 2e-5, 9e8 as u64)
+        .unwrap_err()
+        .to_string();
     assert!(e.contains(checks::MAX_STEPS_ENV), "{e}");
+    // A 50 kHz record's samples are one step each: its work is its steps.
+    let fast = vec![("fast.csv".to_string(), 1_000_000, 20.0)];
+    checks::bound_gap_within(&fast, 2e-5, 110_000_000).expect("1e6 steps a pass, 1e8 in all");
+    assert!(checks::bound_gap_within(&fast, 2e-5, 90_000_000).is_err());
 }
 
 #[test]
