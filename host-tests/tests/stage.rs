@@ -10,7 +10,7 @@ use model_core::drift::{Drift, DriftConfig, DriftState};
 use model_core::gain::{FastGain, FastGainConfig};
 use model_core::hysteresis::{HysteresisMemory, HysteresisTable};
 use model_core::params;
-use model_core::stage::{Feedforward, ModeConfig, Stage, StageConfig};
+use model_core::stage::{Feedforward, ModeConfig, Stage, StageConfig, StageState};
 use model_core::{AdcCode, DacCode};
 use proptest::prelude::*;
 
@@ -697,6 +697,16 @@ fn held_step_stages() -> Vec<StageConfig> {
     vec![full, two_modes, play, StageConfig::thesis_linear()]
 }
 
+/// `n` single steps of the command `u` from `s`: the reading after them (the last one's
+/// before them if `n` is 0).
+fn single_steps(stage: &Stage, s: &mut StageState, u: f32, n: u32) -> f32 {
+    let mut y = s.signals().measured_v;
+    for _ in 0..n {
+        y = stage.step(s, u);
+    }
+    y
+}
+
 proptest! {
     #![proptest_config(ProptestConfig { cases: 48, ..ProptestConfig::default() })]
 
@@ -730,10 +740,7 @@ proptest! {
         for &(u, n, repeat) in &holds {
             let u = if repeat { last_u } else { u };
             last_u = u;
-            let mut y_one = one.signals().measured_v;
-            for _ in 0..n {
-                y_one = stage.step(&mut one, u);
-            }
+            let y_one = single_steps(&stage, &mut one, u, n);
             let y_held = stage.step_held(&mut held, u, n);
             prop_assert_eq!(y_one.to_bits(), y_held.to_bits(), "reading after {} steps at {} V", n, u);
             prop_assert_eq!(format!("{one:?}"), format!("{held:?}"));
@@ -764,10 +771,7 @@ proptest! {
         for &(u, n, repeat) in &holds {
             let u = if repeat { last_u } else { u };
             last_u = u;
-            let mut y_one = one.signals().measured_v;
-            for _ in 0..n {
-                y_one = stage.step(&mut one, u);
-            }
+            let y_one = single_steps(&stage, &mut one, u, n);
             let left = stage.settle_held(&mut held, u, n);
             let map = maps.entry(left).or_insert_with(|| stage.held_map(left));
             let y_held = stage.finish_held(&mut held, left, map.as_ref());
