@@ -142,7 +142,8 @@ fn semicolon_and_tab_separated_records_read_with_decimal_commas() {
     let e = err("t,u,y\nNA,NA,NA\n0,0.5,0.25\n");
     assert!(e.contains("line 2"), "{e}");
     // Every field in double quotes (a spreadsheet's or a data frame's "quote all"), with
-    // points, with decimal commas under semicolons, or under commas (inside the quotes).
+    // points, or with decimal commas under semicolons; a header with a comma inside its
+    // quotes is separated by its semicolons.
     let quoted = Record::parse(
         "\"t\",\"u\",\"y\"\n\"0\",\"0.5\",\"0.25\"\n\"0.001\",\"1.5\",\"-0.75\"\n\"0.002\",\"2\",\"1e-3\"\n",
     );
@@ -151,9 +152,14 @@ fn semicolon_and_tab_separated_records_read_with_decimal_commas() {
         "\"t\";\"u\";\"y\"\n\"0\";\"0,5\";\"0,25\"\n\"0,001\";\"1,5\";\"-0,75\"\n\"0,002\";\"2\";\"1e-3\"\n",
     );
     assert_eq!(quoted.unwrap(), commas);
-    let quoted =
-        Record::parse("t,u,y\n0,\"0,5\",\"0,25\"\n\"0,001\",\"1,5\",-0.75\n0.002,2,1e-3\n");
-    assert_eq!(quoted.unwrap(), commas);
+    let named = Record::parse_named(
+        "\"t, s\";\"u\";\"y\"\n0;0,5;0,25\n0,001;1,5;-0,75\n0,002;2;1e-3\n",
+        ["t, s", "u", "y"],
+    );
+    assert_eq!(named.unwrap(), commas);
+    // Under commas a quoted comma is a thousands separator or a decimal comma: refused.
+    let e = err("t,u,y\n0,\"1,234\",0.5\n0.001,1,0.5\n");
+    assert!(e.contains("line 2") && e.contains("1,234"), "{e}");
     // Quotes that do not close leave the line's fields unsplit after them: refused by count.
     let e = err("t,u,y\n0,\"0.5,0.25\n");
     assert!(e.contains("line 2") && e.contains("fields"), "{e}");

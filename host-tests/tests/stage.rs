@@ -784,7 +784,7 @@ proptest! {
                 ("drift", one.signals().drift_v, held.signals().drift_v),
             ] {
                 prop_assert!(
-                    (a - b).abs() <= HELD_CLOSED_TOL_V,
+                    (a - b).abs() <= HELD_CLOSED_TOL_V[which],
                     "{} after {} steps at {} V: {} stepped, {} closed",
                     what, n, u, a, b
                 );
@@ -793,10 +793,18 @@ proptest! {
     }
 }
 
-/// How far the closed form of a hold may read from the single steps: a quarter of a 16-bit
-/// code over the sensor's 20 V (76 uV). The closed form keeps full `f32` precision against an
-/// `f64` reference (model-core's `a_hold_in_closed_form_matches_the_f64_reference`); the single
-/// steps round at every step, and through the lightly damped second mode that rounding builds
-/// up: 44 uV apart at most over 1200 random cases (5.7 uV on the linear model, 3.8 uV with play
-/// operators), measured when this test was written (session 43).
-const HELD_CLOSED_TOL_V: f32 = 0.25 * 20.0 / 65536.0;
+/// How far the closed form of a hold may read from the single steps, per stage of
+/// `held_step_stages`: a twentieth of a 16-bit code over the sensor's 20 V (15 uV) on the
+/// plant, a quarter (76 uV) on the two modes. The closed form keeps full `f32` precision
+/// against an `f64` reference (model-core's `a_hold_in_closed_form_matches_the_f64_reference`,
+/// which checks the delay line's inputs too); the single steps round at every step, and
+/// through the lightly damped second mode that rounding builds up. Measured over 1200 random
+/// cases when this test was written (session 43): 44 uV apart at most on the two modes, 5.7 uV
+/// on the linear model, 3.8 uV with play operators. (The thesis' full stage is noisy: no map,
+/// the bits compared.)
+const HELD_CLOSED_TOL_V: [f32; 4] = [
+    0.0,
+    0.25 * 20.0 / 65536.0,
+    0.05 * 20.0 / 65536.0,
+    0.05 * 20.0 / 65536.0,
+];

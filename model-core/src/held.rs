@@ -19,20 +19,21 @@
 //! (promoted) on the basis; the lags need only `r_j^n`.
 //!
 //! The closed form is not the stepped one to the bit: it rounds once where stepping rounds at
-//! every step (`f32`, with the lags' compensated sums). The tests bound the difference below
-//! a thousandth of a 16-bit ADC code. [`crate::stage::Stage::step_held`] keeps the stepped
-//! form; the caller chooses (the host keeps a map per stretch length it meets).
+//! every step (`f32`, with the lags' compensated sums). The tests bound it within half an
+//! `f32` step of an `f64` reference of the same recursions, and within a twentieth (the plant)
+//! to a quarter (the lightly damped two modes, where the stepped form's own rounding builds
+//! up) of a 16-bit ADC code of the stepped form. [`crate::stage::Stage::step_held`] keeps the
+//! stepped form; the caller chooses (the host keeps a map per stretch length it meets).
 //!
-//! Bounded: building a map is `n` steps of a `(d + 5) x 5` product; applying it is one
-//! product. Delays of up to [`HELD_WINDOW_MAX`]` - 1` whole samples are covered (the thesis'
-//! 85 us is 4); longer ones get no map and are stepped.
+//! Bounded: building a map is `n` steps of a `P x (P + d + 5)` product; applying it is one
+//! product. Every delay the plant's line holds is covered. A map carries a fingerprint of the
+//! coefficients it was built from, and a stage applies only its own.
 
 use crate::sections::Accumulator;
 
-/// The longest delay line a [`HeldMap`] reads back, in samples: whole delays of up to 15
-/// samples (0.3 ms at 50 kHz; the thesis' 85 us is 4.25 samples). Our assumption: the model
-/// files' extra delays stay well below it; a longer one is stepped.
-pub const HELD_WINDOW_MAX: usize = 16;
+/// The longest delay line a [`HeldMap`] reads back, in samples: the plant's whole line
+/// ([`crate::plant::MAX_DELAY_SAMPLES`]; the thesis' 85 us is 4.25 samples).
+pub const HELD_WINDOW_MAX: usize = crate::plant::MAX_DELAY_SAMPLES;
 
 /// The largest section order (the two modes' five states).
 const ORDER_MAX: usize = 5;
@@ -49,7 +50,8 @@ const COLUMNS: usize = ORDER_MAX + HELD_WINDOW_MAX + 1 + LAGS;
 #[derive(Clone, Debug, PartialEq)]
 pub struct HeldMap {
     steps: u32,
-    order: usize,
+    /// The fingerprint of the coefficients it was built from ([`fingerprint`]).
+    key: u64,
     window: usize,
     /// The section's states after `steps`: `rows[i] . b`.
     rows: [[f64; COLUMNS]; ORDER_MAX],
@@ -84,17 +86,19 @@ impl HeldMap {
         self.tail[0]
     }
 
-    /// Whether this map was built for a section of this order and delay.
-    pub(crate) fn fits<const P: usize>(&self, s: &Section<'_, P>) -> bool {
-        self.order == P && self.window == s.delay_samples + 1
+    /// The fingerprint of the coefficients it was built from.
+    pub(crate) fn key(&self) -> u64 {
+        self.key
     }
 
-    /// Build the map of `steps` steps for `section` and the lags' ratios `r_j = 1 - alpha_j`.
-    /// `None` for 0 steps, an order above 5 or a delay beyond the window.
+    /// Build the map of `steps` steps for `section` and the lags' ratios `r_j = 1 - alpha_j`,
+    /// carrying `key` (their [`fingerprint`]). `None` for 0 steps, an order above 5 or a
+    /// delay beyond the window.
     pub(crate) fn build<const P: usize>(
         section: &Section<'_, P>,
         ratios: [f64; LAGS],
         steps: u32,
+        key: u64,
     ) -> Option<Self> {
         let window = section.delay_samples + 1;
         if steps == 0 || P > ORDER_MAX || window > HELD_WINDOW_MAX {
@@ -156,7 +160,7 @@ impl HeldMap {
         }
         Some(Self {
             steps,
-            order: P,
+            key,
             window,
             rows: x,
             tail,
@@ -187,15 +191,42 @@ impl HeldMap {
             *xi = row.iter().zip(&b).map(|(r, v)| r * v).sum::<f64>() as f32;
         }
         let steps = self.steps as usize;
+        // (The head's offset taken modulo the line first: no overflow for any `steps`.)
+        let end = (head + steps % L) % L;
         for m in 0..(self.window + 1).min(steps) {
             let t = self.tail[m];
             let u = level + (0..LAGS).map(|j| errors[j] * t[j]).sum::<f64>();
-            if let Some(slot) = state.line.get_mut((head + steps - m) % L) {
+            if let Some(slot) = state.line.get_mut((end + L - m % L) % L) {
                 *slot = u as f32;
             }
         }
-        *state.head = (head + steps) % L;
+        *state.head = end;
     }
+}
+
+/// The fingerprint of a section's coefficients and the lags' ratios (FNV-1a over their bits
+/// and the delay): what a [`HeldMap`] is built from.
+pub(crate) fn fingerprint<const P: usize>(section: &Section<'_, P>, ratios: [f64; LAGS]) -> u64 {
+    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
+    let mut eat = |bits: u64| {
+        h ^= bits;
+        h = h.wrapping_mul(0x0000_0100_0000_01b3);
+    };
+    eat(P as u64);
+    eat(section.delay_samples as u64);
+    for row in section.phi {
+        row.iter().for_each(|v| eat(v.to_bits() as u64));
+    }
+    section
+        .gamma_new
+        .iter()
+        .for_each(|v| eat(v.to_bits() as u64));
+    section
+        .gamma_old
+        .iter()
+        .for_each(|v| eat(v.to_bits() as u64));
+    ratios.iter().for_each(|v| eat(v.to_bits()));
+    h
 }
 
 /// The lag's value after a stretch: its target plus its error decayed.

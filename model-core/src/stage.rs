@@ -316,6 +316,8 @@ pub struct Stage {
     plant: LinearPlant,
     second_mode: Option<TwoModes>,
     sensor: Sensor,
+    /// The fingerprint a [`HeldMap`] built for this stage carries ([`crate::held`]).
+    held_key: u64,
 }
 
 /// Everything the stage remembers between steps, and the signals of the last step.
@@ -401,7 +403,28 @@ impl Stage {
                 .map(|m| TwoModes::new(&cfg.plant_config(), m))
                 .transpose()?,
             sensor: Sensor::new(&cfg.sensor)?,
-        })
+            held_key: 0,
+        }
+        .keyed())
+    }
+
+    /// `self` with [`Self::held_key`] computed: the fingerprint of the coefficients a
+    /// [`HeldMap`] is built from (the section's, the lags'), so that a map built for another
+    /// stage is not applied to this one.
+    fn keyed(mut self) -> Self {
+        let ratios = self.held_ratios();
+        self.held_key = match &self.second_mode {
+            Some(m) => crate::held::fingerprint(&m.section(), ratios),
+            None => crate::held::fingerprint(&self.plant.section(), ratios),
+        };
+        self
+    }
+
+    /// The drift lags' ratios `1 - alpha` (0 without a drift: its errors are 0 too).
+    fn held_ratios(&self) -> [f64; 3] {
+        self.drift
+            .as_ref()
+            .map_or([0.0; 3], |d| d.lags.map(|l| 1.0 - l.alpha as f64))
     }
 
     /// The amplifier block (its limits, for checks).
@@ -631,7 +654,7 @@ impl Stage {
     /// with `map` (this stage's [`Self::held_map`] of `left` steps) in closed form: one
     /// product, the same to well under an ADC code ([`crate::held`]). The map is not used
     /// with sensor noise (each step draws from it) nor when it was built for another length
-    /// or section; the stretch is then stepped. Returns the reading at the end.
+    /// or stage; the stretch is then stepped. Returns the reading at the end.
     pub fn finish_held(&self, s: &mut StageState, left: u32, map: Option<&HeldMap>) -> f32 {
         if left == 0 {
             return s.signals.measured_v;
@@ -670,13 +693,9 @@ impl Stage {
     }
 
     /// The closed form of [`Self::finish_held`]; `false` (nothing changed) when `map` was
-    /// built for another section.
+    /// built for another stage (its section's or its lags' coefficients differ).
     fn finish_held_closed(&self, s: &mut StageState, weight: Option<f32>, map: &HeldMap) -> bool {
-        let fits = match &self.second_mode {
-            Some(m) => map.fits(&m.section()),
-            None => map.fits(&self.plant.section()),
-        };
-        if !fits {
+        if map.key() != self.held_key {
             return false;
         }
         // The lags' targets `g w` (in f32, as a step computes them) and their errors.
@@ -727,16 +746,16 @@ impl Stage {
 
     /// The closed form of `steps` held steps past the fast part's fixed point, for
     /// [`Self::finish_held`] (host use: built in `f64`, `steps` steps of a small product).
-    /// `None` for 0 steps or a delay longer than [`crate::held::HELD_WINDOW_MAX`]` - 1`
-    /// samples.
+    /// `None` for 0 steps, and with sensor noise (each step draws from it, so
+    /// [`Self::finish_held`] steps).
     pub fn held_map(&self, steps: u32) -> Option<HeldMap> {
-        let ratios = self
-            .drift
-            .as_ref()
-            .map_or([0.0; 3], |d| d.lags.map(|l| 1.0 - l.alpha as f64));
+        if self.sensor.is_noisy() {
+            return None;
+        }
+        let ratios = self.held_ratios();
         match &self.second_mode {
-            Some(m) => HeldMap::build(&m.section(), ratios, steps),
-            None => HeldMap::build(&self.plant.section(), ratios, steps),
+            Some(m) => HeldMap::build(&m.section(), ratios, steps, self.held_key),
+            None => HeldMap::build(&self.plant.section(), ratios, steps, self.held_key),
         }
     }
 }
@@ -863,17 +882,23 @@ mod held_tests {
     //! promoted; the lags' `y + alpha (g w - y)`), run in `f64`, one step at a time.
     use super::*;
 
+    /// What the reference leaves after a hold: the section's states, the lags' values, and
+    /// the section's inputs, newest last.
+    struct Reference<const P: usize> {
+        x: [f64; P],
+        lags: [f64; 3],
+        inputs: std::vec::Vec<f64>,
+    }
+
     /// `n` held steps of the lags and the section in `f64`, from `s` (the fast part at its
-    /// fixed point). Returns the section's states and the lags' values after them.
+    /// fixed point), the section's state given as its states, line and head.
     fn reference<const P: usize>(
         sec: &crate::held::Section<'_, P>,
         stage: &Stage,
         s: &StageState,
-        x_f32: &[f32; P],
-        line: &[f32; MAX_DELAY_SAMPLES],
-        head: usize,
+        (x_f32, line, head): (&[f32; P], &[f32; MAX_DELAY_SAMPLES], usize),
         n: u32,
-    ) -> ([f64; P], [f64; 3]) {
+    ) -> Reference<P> {
         let d = sec.delay_samples;
         let ue = stage.control_input_v(s.signals.amplifier_v);
         let mut x = x_f32.map(|v| v as f64);
@@ -882,14 +907,19 @@ mod held_tests {
             .rev()
             .map(|m| line[(head + MAX_DELAY_SAMPLES - m) % MAX_DELAY_SAMPLES] as f64)
             .collect();
-        let drift = stage.drift.as_ref().unwrap();
-        let w = drift.weight(ue);
         let mut y = s.drift.y.map(|a| a.exact());
         for _ in 0..n {
-            for (yj, lag) in y.iter_mut().zip(&drift.lags) {
-                *yj += lag.alpha as f64 * ((lag.gain * w) as f64 - *yj);
-            }
-            inputs.push(s.signals.fast_v as f64 + y.iter().sum::<f64>());
+            let level = match &stage.drift {
+                Some(drift) => {
+                    let w = drift.weight(ue);
+                    for (yj, lag) in y.iter_mut().zip(&drift.lags) {
+                        *yj += lag.alpha as f64 * ((lag.gain * w) as f64 - *yj);
+                    }
+                    s.signals.fast_v as f64 + y.iter().sum::<f64>()
+                }
+                None => (s.signals.fast_v + s.signals.drift_v) as f64,
+            };
+            inputs.push(level);
             let k = inputs.len() - 1;
             let (u_new, u_old) = (inputs[k - d], inputs[k - d - 1]);
             let before = x;
@@ -900,20 +930,59 @@ mod held_tests {
                 }
             }
         }
-        (x, y)
+        Reference { x, lags: y, inputs }
     }
 
-    /// From a state reached by a step to 8 V after a ramp, 37 and 2000 held steps in closed
-    /// form leave the section's states and the lags within 4.8e-7 V of the `f64` reference:
-    /// half an `f32` step at values below 16 V, so the closed form keeps full `f32`
-    /// precision (it rounds once, at the end), on the plant and on the two modes. Stepping in `f32` instead
-    /// drifts from the reference by more on the lightly damped two modes (printed).
+    /// Within half an `f32` step of a value below 16 V: the closed form rounds once.
+    const HALF_STEP_V: f64 = 4.8e-7;
+
+    /// The closed form's section state (states, line, head) against the reference: the states
+    /// and the last `d + 2` inputs of the line (all that later steps read) within
+    /// [`HALF_STEP_V`], the head where `n` steps leave it.
+    fn check<const P: usize>(
+        what: &str,
+        r: &Reference<P>,
+        (x, line, head): (&[f32; P], &[f32; MAX_DELAY_SAMPLES], usize),
+        (head0, n, d): (usize, u32, usize),
+    ) {
+        for (i, (g, w)) in x.iter().zip(&r.x).enumerate() {
+            let g = *g as f64;
+            assert!(
+                (g - w).abs() < HALF_STEP_V,
+                "{what}: state {i}: {g} against {w}"
+            );
+        }
+        assert_eq!(
+            head,
+            (head0 + n as usize) % MAX_DELAY_SAMPLES,
+            "{what}: head"
+        );
+        for m in 0..(d + 2).min(n as usize) {
+            let g = line[(head + MAX_DELAY_SAMPLES - m) % MAX_DELAY_SAMPLES] as f64;
+            let w = r.inputs[r.inputs.len() - 1 - m];
+            assert!(
+                (g - w).abs() < HALF_STEP_V,
+                "{what}: input of age {m}: {g} against {w}"
+            );
+        }
+    }
+
+    /// From a state reached by a step to 8 V after a ramp, 1, 3, 37, 2000 and 50 000 held
+    /// steps in closed form (fewer than the delay, about a 1 kHz sample, the host's longest)
+    /// leave the section's states, its line's inputs and the lags within half an `f32` step
+    /// of the `f64` reference (the closed form keeps full `f32` precision: it rounds once, at
+    /// the end), and the head where the steps leave it: on the plant and on the two modes,
+    /// with and without a drift. Stepping in `f32` instead drifts from the reference by more
+    /// on the lightly damped two modes (printed).
     #[test]
     fn a_hold_in_closed_form_matches_the_f64_reference() {
-        for second in [false, true] {
+        for (second, drift) in [(false, true), (true, true), (false, false), (true, false)] {
             let mut cfg = StageConfig::thesis_full();
             cfg.sensor.noise_v = 0.0;
             cfg.hysteresis = Some(HysteresisTable::thesis_default());
+            if !drift {
+                cfg.drift = None;
+            }
             if second {
                 cfg.second_mode = Some(ModeConfig {
                     mode_hz: params::SECOND_MODE_HZ,
@@ -921,48 +990,71 @@ mod held_tests {
                 });
             }
             let stage = Stage::new(&cfg).unwrap();
-            for n in [37u32, 2000] {
+            for n in [1u32, 3, 37, 2000, 50_000] {
+                let what = std::format!("second mode {second}, drift {drift}, {n} steps");
                 let mut s = stage.steady_state(1.0);
                 for k in 0..500 {
                     stage.step(&mut s, 1.0 + 0.01 * k as f32);
                 }
                 let left = stage.settle_held(&mut s, 8.0, n + 2);
-                assert_eq!(left, n, "the fixed point after two steps");
-                let (want_x, want_y, got): (std::vec::Vec<f64>, [f64; 3], std::vec::Vec<f64>) =
-                    if second {
-                        let m = stage.second_mode.as_ref().unwrap();
-                        let st = s.second_mode;
-                        let (x, y) =
-                            reference(&m.section(), &stage, &s, &st.x, &st.line, st.head, n);
-                        let map = stage.held_map(n).unwrap();
-                        let mut closed = s.clone();
-                        let mut stepped = s.clone();
-                        stage.finish_held(&mut closed, n, Some(&map));
-                        stage.finish_held(&mut stepped, n, None);
-                        let worst = (0..5)
-                            .map(|i| (stepped.second_mode.x[i] as f64 - x[i]).abs())
-                            .fold(0.0, f64::max);
-                        std::println!("two modes, {n} steps: f32 stepping {worst:.2e} V off");
-                        s = closed;
-                        (x.to_vec(), y, s.second_mode.x.map(|v| v as f64).to_vec())
-                    } else {
-                        let sec = stage.plant.section();
-                        let (xs, line, head) = (s.plant.x, s.plant.line, s.plant.head);
-                        let (x, y) = reference(&sec, &stage, &s, &xs, &line, head, n);
-                        let map = stage.held_map(n).unwrap();
-                        stage.finish_held(&mut s, n, Some(&map));
-                        (x.to_vec(), y, s.plant.x.map(|v| v as f64).to_vec())
-                    };
-                for (i, (g, w)) in got.iter().zip(&want_x).enumerate() {
-                    assert!(
-                        (g - w).abs() < 4.8e-7,
-                        "state {i} after {n}: {g} against {w}"
+                assert_eq!(left, n, "{what}: the fixed point after two steps");
+                let map = stage.held_map(n).unwrap();
+                let mut closed = s.clone();
+                stage.finish_held(&mut closed, n, Some(&map));
+                let lags = if let Some(m) = &stage.second_mode {
+                    let (st, c) = (&s.second_mode, &closed.second_mode);
+                    let r = reference(&m.section(), &stage, &s, (&st.x, &st.line, st.head), n);
+                    let d = m.delay_samples;
+                    check(&what, &r, (&c.x, &c.line, c.head), (st.head, n, d));
+                    let mut stepped = s.clone();
+                    stage.finish_held(&mut stepped, n, None);
+                    let worst = (0..5)
+                        .map(|i| (stepped.second_mode.x[i] as f64 - r.x[i]).abs())
+                        .fold(0.0, f64::max);
+                    std::println!("{what}: f32 stepping {worst:.2e} V off");
+                    r.lags
+                } else {
+                    let (st, c) = (&s.plant, &closed.plant);
+                    let r = reference(
+                        &stage.plant.section(),
+                        &stage,
+                        &s,
+                        (&st.x, &st.line, st.head),
+                        n,
                     );
-                }
-                for (j, (a, w)) in s.drift.y.iter().zip(want_y).enumerate() {
-                    assert!((a.exact() - w).abs() < 4.8e-7, "lag {j} after {n}");
+                    let d = stage.plant.delay_samples();
+                    check(&what, &r, (&c.x, &c.line, c.head), (st.head, n, d));
+                    r.lags
+                };
+                for (j, (a, w)) in closed.drift.y.iter().zip(lags).enumerate() {
+                    assert!((a.exact() - w).abs() < HALF_STEP_V, "{what}: lag {j}");
                 }
             }
         }
+    }
+
+    /// A map is applied only by the stage it was built for: one built for a stage whose
+    /// drift is slower leaves the state as it was and the stretch is stepped (the same
+    /// reading, to the bit, as without a map); with sensor noise no map is built.
+    #[test]
+    fn a_map_of_another_stage_is_not_applied() {
+        let mut cfg = StageConfig::thesis_full();
+        cfg.sensor.noise_v = 0.0;
+        let stage = Stage::new(&cfg).unwrap();
+        let mut slower = cfg;
+        if let Some(d) = slower.drift.as_mut() {
+            d.taus_s[2] *= 2.0;
+        }
+        let other = Stage::new(&slower).unwrap().held_map(48).unwrap();
+        let mut s = stage.steady_state(1.0);
+        let left = stage.settle_held(&mut s, 6.0, 50);
+        let mut with = s.clone();
+        let mut without = s.clone();
+        let a = stage.finish_held(&mut with, left, Some(&other));
+        let b = stage.finish_held(&mut without, left, None);
+        assert_eq!(a.to_bits(), b.to_bits());
+        assert_eq!(with, without);
+        let noisy = Stage::new(&StageConfig::thesis_full()).unwrap();
+        assert!(noisy.held_map(48).is_none());
     }
 }

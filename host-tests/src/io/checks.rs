@@ -137,7 +137,9 @@ pub fn gap_max_stage_steps() -> u64 {
 /// A record's sample as `piezo gap` simulates it, in stage steps' work, where the sample
 /// holds more steps: whole steps to the fast part's fixed point (two after a change of
 /// input), then the rest of the hold in closed form ([`model_core::held`]: one product, about
-/// four steps' work). Eight, with a margin (our assumption; measured in session 43: a 600 s
+/// four steps' work; a product per [`crate::sim::open_loop::HELD_MAX_STEPS`] of a longer
+/// hold; its simulations are noiseless, and every delay the plant holds has a map). Eight,
+/// with a margin (our assumption; measured in session 43: a 600 s
 /// identification record at 1 kHz, 30 M stage steps a pass, was diagnosed in 9.8 s on 2
 /// cores, where the stage-step count had refused it).
 pub const GAP_HELD_SAMPLE_STEPS: u64 = 8;
@@ -165,7 +167,16 @@ pub fn bound_gap_within(
     }
     let steps = records
         .iter()
-        .map(|r| stage_steps(r.2, period_s).min((r.1 as u64).saturating_mul(GAP_HELD_SAMPLE_STEPS)))
+        .map(|r| {
+            // A hold longer than the longest map takes a map per `HELD_MAX_STEPS` more.
+            let steps = stage_steps(r.2, period_s);
+            let maps = steps / crate::sim::open_loop::HELD_MAX_STEPS as u64;
+            steps.min(
+                (r.1 as u64)
+                    .saturating_add(maps)
+                    .saturating_mul(GAP_HELD_SAMPLE_STEPS),
+            )
+        })
         .fold(0u64, u64::saturating_add);
     let names: Vec<&str> = records.iter().map(|r| r.0.as_str()).collect();
     bound_steps(

@@ -20,7 +20,8 @@
 //! Columns are separated by commas (or, when the header has no comma, by semicolons or tabs,
 //! as spreadsheets in decimal-comma locales export them; a decimal comma is then read as a
 //! point), surrounding spaces and double quotes are trimmed (a separator inside quotes is the
-//! field's: `"0,5"` under commas is a decimal comma), blank lines are skipped,
+//! field's; under commas a quoted `"1,234"` is refused, as a thousands separator or a
+//! decimal comma it cannot tell), blank lines are skipped,
 //! a UTF-8 byte-order mark at the start is ignored. Every failure is a [`RecordError`] naming
 //! where (the line of a CSV file, the element of a column handed to [`Record::new`], e.g. from
 //! a `.mat` file) and the problem: a missing column, a field that is not a number, NaN or
@@ -269,15 +270,26 @@ fn check_values(v: &[f64], column: &str, at: fn(usize) -> At) -> Result<(), Reco
 
 /// The field separator a header line uses: `,` if it has one, else `;` or a tab if it has
 /// one, else a space (any run of blanks: a `.txt` or `.dat` column file as MATLAB's
-/// `writematrix` or a logger writes it) if it has one, else `,`.
+/// `writematrix` or a logger writes it) if it has one, else `,`. Text inside double quotes
+/// does not count (`"Zeit, s";"U";"Y"` is separated by semicolons).
 pub fn separator(header: &str) -> char {
-    if header.contains(',') {
+    let mut quoted = false;
+    let bare: String = header
+        .chars()
+        .filter(|&c| {
+            if c == '"' {
+                quoted = !quoted;
+            }
+            !quoted && c != '"'
+        })
+        .collect();
+    if bare.contains(',') {
         ','
-    } else if header.contains(';') {
+    } else if bare.contains(';') {
         ';'
-    } else if header.contains('\t') {
+    } else if bare.contains('\t') {
         '\t'
-    } else if header.contains(' ') {
+    } else if bare.contains(' ') {
         ' '
     } else {
         ','
@@ -286,8 +298,7 @@ pub fn separator(header: &str) -> char {
 
 /// A line's fields under separator `sep` (a space: any run of blanks), trimmed, each without
 /// the double quotes around it (`"0.5"`, as spreadsheets and data frames write every field
-/// when asked to quote): a separator inside quotes belongs to the field (`"0,5"`, a decimal
-/// comma under commas).
+/// when asked to quote): a separator inside quotes belongs to the field.
 fn fields_of(s: &str, sep: char) -> Vec<&str> {
     if sep == ' ' {
         return s.split_whitespace().map(unquote).collect();
@@ -326,10 +337,11 @@ fn is_unit(f: &str) -> bool {
         && !["na", "nan", "null", "none", "n/a", "inf"].contains(&bare.as_str())
 }
 
-/// A field as a number: a decimal comma is read as a point (a field holds a comma only where
-/// the separator is not one, or inside quotes).
-fn number_of(text: &str) -> Option<f64> {
-    if text.contains(',') {
+/// A field as a number: a decimal comma is read as a point where the separator is not a
+/// comma. Under commas a comma inside a quoted field is not read: `"1,234"` may be a
+/// thousands separator as well as a decimal comma, and is refused rather than guessed.
+fn number_of(text: &str, sep: char) -> Option<f64> {
+    if sep != ',' && text.contains(',') {
         text.replacen(',', ".", 1).parse().ok()
     } else {
         text.parse().ok()
@@ -558,11 +570,12 @@ impl Record {
                         let Some(idx) = *idx else { continue };
                         let text = fields.get(idx).copied().unwrap_or("");
                         let column = names.get(idx).cloned().unwrap_or_default();
-                        let v: f64 = number_of(text).ok_or_else(|| RecordError::NotANumber {
-                            line,
-                            column: column.clone(),
-                            text: truncate(text),
-                        })?;
+                        let v: f64 =
+                            number_of(text, sep).ok_or_else(|| RecordError::NotANumber {
+                                line,
+                                column: column.clone(),
+                                text: truncate(text),
+                            })?;
                         if !v.is_finite() {
                             return Err(RecordError::NotFinite {
                                 at: At::Line(line),

@@ -73,7 +73,13 @@ pub fn simulate_after_while(
         // f32 rounds at every step); at most 2^32 - 1 a call, so a longer hold takes several.
         while k < until {
             let steps = (until - k).min(u32::MAX as u64) as u32;
-            let left = stage.settle_held(&mut s, held, steps);
+            let mut left = stage.settle_held(&mut s, held, steps);
+            // A hold longer than the longest map: maps of that length, then the rest (the
+            // fast part stays at its fixed point).
+            while left > HELD_MAX_STEPS {
+                stage.finish_held(&mut s, HELD_MAX_STEPS, maps.get(stage, HELD_MAX_STEPS));
+                left -= HELD_MAX_STEPS;
+            }
             last = stage.finish_held(&mut s, left, maps.get(stage, left));
             k += steps as u64;
         }
@@ -85,10 +91,13 @@ pub fn simulate_after_while(
     Some(y)
 }
 
+/// The longest hold put in closed form at once: 1 s at 50 kHz (a 1 Hz record); a longer one
+/// takes several (a map costs its length in small products to build).
+pub const HELD_MAX_STEPS: u32 = 50_000;
+
 /// The closed forms of the holds one simulation meets, by their length (a record at a steady
 /// rate meets one to three). Bounded: at most [`HeldMaps::MAX_MAPS`] lengths, from
-/// [`HeldMaps::MIN_STEPS`] to [`HeldMaps::MAX_STEPS`] steps (a map costs its length in small
-/// products to build); other holds are stepped.
+/// [`HeldMaps::MIN_STEPS`] to [`HELD_MAX_STEPS`] steps; other holds are stepped.
 #[derive(Default)]
 struct HeldMaps {
     /// (length, its map), in the order met: a linear search over a handful of keys.
@@ -103,12 +112,9 @@ impl HeldMaps {
     /// per hold, simulates 8 % faster with maps; a 28 kHz record, one or two left, 1.6x
     /// slower with a map for every hold).
     const MIN_STEPS: u32 = 4;
-    /// The longest hold put in closed form: 1 s at 50 kHz (a 1 Hz record).
-    const MAX_STEPS: u32 = 50_000;
-
     /// The map of `left` steps, built on first use.
     fn get(&mut self, stage: &Stage, left: u32) -> Option<&HeldMap> {
-        if !(Self::MIN_STEPS..=Self::MAX_STEPS).contains(&left) {
+        if !(Self::MIN_STEPS..=HELD_MAX_STEPS).contains(&left) {
             return None;
         }
         let at = match self.maps.iter().position(|(n, _)| *n == left) {
