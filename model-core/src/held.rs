@@ -187,8 +187,15 @@ impl HeldMap {
         }
         b[P + self.window] = level;
         b[P + self.window + 1..P + self.window + 1 + LAGS].copy_from_slice(&errors);
+        // (Only the columns this section's basis uses: its states, its window, C, the lags.)
+        let used = P + self.window + 1 + LAGS;
         for (xi, row) in state.x.iter_mut().zip(&self.rows) {
-            *xi = row.iter().zip(&b).map(|(r, v)| r * v).sum::<f64>() as f32;
+            *xi = row
+                .iter()
+                .zip(&b)
+                .take(used)
+                .map(|(r, v)| r * v)
+                .sum::<f64>() as f32;
         }
         let steps = self.steps as usize;
         // (The head's offset taken modulo the line first: no overflow for any `steps`.)
