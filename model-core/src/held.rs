@@ -35,6 +35,11 @@ use crate::sections::Accumulator;
 /// ([`crate::plant::MAX_DELAY_SAMPLES`]; the thesis' 85 us is 4.25 samples).
 pub const HELD_WINDOW_MAX: usize = crate::plant::MAX_DELAY_SAMPLES;
 
+/// The longest stretch a host builds one map for: building costs the map's length in small
+/// products, so a longer hold takes several (50 000 steps: 1 s at 50 kHz, a 1 Hz record's
+/// sample; our assumption).
+pub const HELD_MAP_STEPS_MAX: u32 = 50_000;
+
 /// The largest section order (the two modes' five states).
 const ORDER_MAX: usize = 5;
 

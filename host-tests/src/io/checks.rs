@@ -137,7 +137,7 @@ pub fn gap_max_stage_steps() -> u64 {
 /// A record's sample as `piezo gap` simulates it, in stage steps' work, where the sample
 /// holds more steps: whole steps to the fast part's fixed point (two after a change of
 /// input), then the rest of the hold in closed form ([`model_core::held`]: one product, about
-/// four steps' work; a product per [`crate::sim::open_loop::HELD_MAX_STEPS`] of a longer
+/// four steps' work; a product per [`model_core::held::HELD_MAP_STEPS_MAX`] of a longer
 /// hold; its simulations are noiseless, and every delay the plant holds has a map). Eight,
 /// with a margin (our assumption; measured in session 43: a 600 s
 /// identification record at 1 kHz, 30 M stage steps a pass, was diagnosed in 9.8 s on 2
@@ -168,9 +168,9 @@ pub fn bound_gap_within(
     let steps = records
         .iter()
         .map(|r| {
-            // A hold longer than the longest map takes a map per `HELD_MAX_STEPS` more.
+            // A hold longer than the longest map takes a map per `HELD_MAP_STEPS_MAX` more.
             let steps = stage_steps(r.2, period_s);
-            let maps = steps / crate::sim::open_loop::HELD_MAX_STEPS as u64;
+            let maps = steps / model_core::held::HELD_MAP_STEPS_MAX as u64;
             steps.min(
                 (r.1 as u64)
                     .saturating_add(maps)

@@ -11,7 +11,7 @@
 //! ([`model_core::held`]): a 1 kHz record holds each input for 50 stage steps, and stepping
 //! them one by one was a quarter of the model-gap workflow's time.
 
-use model_core::held::HeldMap;
+use model_core::held::{HELD_MAP_STEPS_MAX as HELD_MAX_STEPS, HeldMap};
 use model_core::stage::Stage;
 
 /// The stage's readings at the times `t_s` for the input `u_v` held between samples.
@@ -91,13 +91,10 @@ pub fn simulate_after_while(
     Some(y)
 }
 
-/// The longest hold put in closed form at once: 1 s at 50 kHz (a 1 Hz record); a longer one
-/// takes several (a map costs its length in small products to build).
-pub const HELD_MAX_STEPS: u32 = 50_000;
-
 /// The closed forms of the holds one simulation meets, by their length (a record at a steady
 /// rate meets one to three). Bounded: at most [`HeldMaps::MAX_MAPS`] lengths, from
-/// [`HeldMaps::MIN_STEPS`] to [`HELD_MAX_STEPS`] steps; other holds are stepped.
+/// [`HeldMaps::MIN_STEPS`] to [`model_core::held::HELD_MAP_STEPS_MAX`] steps; other holds are
+/// stepped.
 #[derive(Default)]
 struct HeldMaps {
     /// (length, its map), in the order met: a linear search over a handful of keys.
