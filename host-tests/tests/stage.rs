@@ -804,7 +804,7 @@ proptest! {
 /// the bits compared.)
 const HELD_CLOSED_TOL_V: [f32; 4] = [
     0.0,
-    0.25 * 20.0 / 65536.0,
-    0.05 * 20.0 / 65536.0,
-    0.05 * 20.0 / 65536.0,
+    0.25 * AdcCode::VOLT_PER_LSB,
+    0.05 * AdcCode::VOLT_PER_LSB,
+    0.05 * AdcCode::VOLT_PER_LSB,
 ];

@@ -29,8 +29,6 @@
 //! product. Every delay the plant's line holds is covered. A map carries a fingerprint of the
 //! coefficients it was built from, and a stage applies only its own.
 
-use crate::sections::Accumulator;
-
 /// The longest delay line a [`HeldMap`] reads back, in samples: the plant's whole line
 /// ([`crate::plant::MAX_DELAY_SAMPLES`]; the thesis' 85 us is 4.25 samples).
 pub const HELD_WINDOW_MAX: usize = crate::plant::MAX_DELAY_SAMPLES;
@@ -239,9 +237,4 @@ pub(crate) fn fingerprint<const P: usize>(section: &Section<'_, P>, ratios: [f64
         .for_each(|v| eat(v.to_bits() as u64));
     ratios.iter().for_each(|v| eat(v.to_bits()));
     h
-}
-
-/// The lag's value after a stretch: its target plus its error decayed.
-pub(crate) fn lag_after(target: f64, error: f64, decay: f64) -> Accumulator {
-    Accumulator::from_exact(target + error * decay)
 }

@@ -76,6 +76,7 @@ use crate::plant::{
     LinearPlant, LinearPlantConfig, MAX_DELAY_SAMPLES, PlantState, continuous_state_space,
 };
 use crate::play::{Play, PlayConfig, PlayState};
+use crate::sections::Accumulator;
 use crate::sensor::{Sensor, SensorConfig, SensorState};
 use core::f64::consts::PI;
 use core::ops::Bound::{Excluded, Included};
@@ -203,6 +204,17 @@ struct TwoModesState {
     x: [f32; 5],
     line: [f32; MAX_DELAY_SAMPLES],
     head: usize,
+}
+
+impl TwoModesState {
+    /// The state as a held stretch's closed form advances it ([`crate::held`]).
+    fn section(&mut self) -> crate::held::SectionState<'_, 5, MAX_DELAY_SAMPLES> {
+        crate::held::SectionState {
+            x: &mut self.x,
+            line: &mut self.line,
+            head: &mut self.head,
+        }
+    }
 }
 
 impl TwoModes {
@@ -714,15 +726,7 @@ impl Stage {
         };
         let position_v = match &self.second_mode {
             Some(_) => {
-                map.apply(
-                    crate::held::SectionState {
-                        x: &mut s.second_mode.x,
-                        line: &mut s.second_mode.line,
-                        head: &mut s.second_mode.head,
-                    },
-                    level,
-                    errors,
-                );
+                map.apply(s.second_mode.section(), level, errors);
                 s.second_mode.x[3]
             }
             None => {
@@ -735,7 +739,7 @@ impl Stage {
         {
             let decay = map.decay();
             for (j, y) in s.drift.y.iter_mut().enumerate() {
-                *y = crate::held::lag_after(targets[j], errors[j], decay[j]);
+                *y = Accumulator::from_exact(targets[j] + errors[j] * decay[j]);
             }
             s.signals.drift_v = d.output(&s.drift);
         }

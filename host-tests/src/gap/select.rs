@@ -2403,8 +2403,7 @@ fn diagnose_split(
 /// with it whether the drift was named.
 fn fewer_names(var: &[f64], a: Diagnosis, b: Diagnosis) -> Diagnosis {
     let (fa, fb) = (a.final_noise_var(var), b.final_noise_var(var));
-    let sg = &a.signatures;
-    let tails = sg.holds > 0 && sg.tail_v >= DRIFT_TAIL_KEEP_NOISE * sg.noise_v;
+    let tails = creep_tails_shown(&a.signatures);
     let counted = |d: &Diagnosis| {
         d.named
             .iter()
@@ -2595,7 +2594,12 @@ fn choose_centre_line(
 /// its change from the model with it: a drift named beside tails it does not reduce would stay
 /// too (none in the suites: a drift is named only where it explains the records).
 fn tails_back(data: &[Data], sims: &[Vec<f64>], noise: &[f64]) -> bool {
-    let sg = signatures::compute(data, sims, noise);
+    creep_tails_shown(&signatures::compute(data, sims, noise))
+}
+
+/// Do the signatures `sg` show the creep's own signature: holds, and tails of
+/// [`DRIFT_TAIL_KEEP_NOISE`] noise floors or more during them?
+fn creep_tails_shown(sg: &signatures::Signatures) -> bool {
     sg.holds > 0 && sg.tail_v >= DRIFT_TAIL_KEEP_NOISE * sg.noise_v
 }
 

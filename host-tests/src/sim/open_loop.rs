@@ -11,7 +11,7 @@
 //! ([`model_core::held`]): a 1 kHz record holds each input for 50 stage steps, and stepping
 //! them one by one was a quarter of the model-gap workflow's time.
 
-use model_core::held::{HELD_MAP_STEPS_MAX as HELD_MAX_STEPS, HeldMap};
+use model_core::held::{HELD_MAP_STEPS_MAX, HeldMap};
 use model_core::stage::Stage;
 
 /// The stage's readings at the times `t_s` for the input `u_v` held between samples.
@@ -76,9 +76,13 @@ pub fn simulate_after_while(
             let mut left = stage.settle_held(&mut s, held, steps);
             // A hold longer than the longest map: maps of that length, then the rest (the
             // fast part stays at its fixed point).
-            while left > HELD_MAX_STEPS {
-                stage.finish_held(&mut s, HELD_MAX_STEPS, maps.get(stage, HELD_MAX_STEPS));
-                left -= HELD_MAX_STEPS;
+            while left > HELD_MAP_STEPS_MAX {
+                stage.finish_held(
+                    &mut s,
+                    HELD_MAP_STEPS_MAX,
+                    maps.get(stage, HELD_MAP_STEPS_MAX),
+                );
+                left -= HELD_MAP_STEPS_MAX;
             }
             last = stage.finish_held(&mut s, left, maps.get(stage, left));
             k += steps as u64;
@@ -111,7 +115,7 @@ impl HeldMaps {
     const MIN_STEPS: u32 = 4;
     /// The map of `left` steps, built on first use.
     fn get(&mut self, stage: &Stage, left: u32) -> Option<&HeldMap> {
-        if !(Self::MIN_STEPS..=HELD_MAX_STEPS).contains(&left) {
+        if !(Self::MIN_STEPS..=HELD_MAP_STEPS_MAX).contains(&left) {
             return None;
         }
         let at = match self.maps.iter().position(|(n, _)| *n == left) {
