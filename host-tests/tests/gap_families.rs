@@ -428,7 +428,8 @@ const TALLY_HEADER: &str =
     "                         cases   exact  false / given          missed  clean named  s/case";
 
 /// Runs the drawn cases (release, the README's test command: 100, seeds 1000..1099,
-/// `GAP_CASES` changes the count, `GAP_SEED=N` runs case N alone; debug builds run 6), prints
+/// `GAP_CASES` changes the count, `GAP_FIRST` the first seed, `GAP_SEED=N` runs case N alone;
+/// debug builds run 6), prints
 /// the confusion table and the tallies by family, hidden effect and truth form, and returns the
 /// overall tally (`None` for a single case).
 fn run_suite() -> Option<Tally> {
@@ -438,9 +439,14 @@ fn run_suite() -> Option<Tally> {
         .and_then(|s| s.parse().ok())
         .unwrap_or(if release { 100 } else { 6 });
     let only: Option<u64> = std::env::var("GAP_SEED").ok().and_then(|s| s.parse().ok());
+    // (`GAP_FIRST`: another first seed, for draws no rule was shaped on)
+    let first: u64 = std::env::var("GAP_FIRST")
+        .ok()
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(1000);
     let seeds: Vec<u64> = match only {
         Some(s) => vec![s],
-        None => (1000..1000 + n_cases).collect(),
+        None => (first..first + n_cases).collect(),
     };
     let started = std::time::Instant::now();
     let outcomes = host_tests::util::par_map(&seeds, |s| run_case(*s));
@@ -562,10 +568,14 @@ fn run_suite() -> Option<Tally> {
 
 /// What the workflow holds on the drawn cases today, as a guard against regressions (the
 /// test command runs it and prints the confusion table): no name on a clean record, and at
-/// least 80 % exact named sets with at most 2.9 % false names, at least 97 % of the
-/// correctly named effects meeting the residual cut (`gap::shrink`), and at least 94 %
-/// of the cases exact or honest, in release with the default 100 cases (`GAP_CASES` unset).
-/// Measured in session 42 (what the final check takes out is said: the shapes that could do
+/// least 81 % exact named sets with at most 1.9 % false names, at least 97 % of the
+/// correctly named effects meeting the residual cut (`gap::shrink`), and at least 95 %
+/// of the cases exact or honest, in release with the default 100 cases (`GAP_CASES` and
+/// `GAP_FIRST` unset). Measured in session 44 (a scale beside a curvature gives way to a
+/// curvature of one more order where that leaves as little, `gap::scale_order`: 1079's false
+/// scale gone): 84.0 % exact, 0 false names of 105, 0 of 15 clean cases named, 98 exact or
+/// honest, the cut 104 of 105; the same rule on seeds 1300-1499, run for the first time
+/// before and after it: 78.5 -> 83.0 % exact, 26 -> 16 false names. Measured in session 42 (what the final check takes out is said: the shapes that could do
 /// the work of an offset it takes out as an unshown level, and a scale or curvature beside
 /// the table it takes out below its bar after a growth over 1.25x, are reported in pairs):
 /// the names and figures of session 41, case by case, and 97 exact or honest (1001, 1020,
@@ -600,11 +610,11 @@ fn run_suite() -> Option<Tally> {
 /// figures are the ignored test below.
 #[test]
 fn randomised_families_hold_their_measured_rates() {
-    let full_run = std::env::var("GAP_CASES").is_err();
+    let full_run = std::env::var("GAP_CASES").is_err() && std::env::var("GAP_FIRST").is_err();
     suite_meets(
-        [80.0, 2.9, 97.0, 94.0],
+        [81.0, 1.9, 97.0, 95.0],
         full_run,
-        "the measured 83 %, 0.9 %, 99.0 % and 97 % with their margins",
+        "the measured 84 %, 0.0 %, 99.0 % and 98 % with their margins",
     );
 }
 

@@ -331,6 +331,25 @@ fn thesis_full_toml() -> toml::Value {
     toml::from_str(&text).unwrap()
 }
 
+/// K'(u) takes the thesis' quadratic (three values, the cubic term 0) or a cubic (four); any
+/// other length is refused with what it takes.
+#[test]
+fn the_gain_polynomial_takes_three_or_four_values() {
+    let with_poly = |poly: &[f64]| {
+        let mut v = thesis_full_toml();
+        v["nonlinear-gain"]["poly"] = toml::Value::try_from(poly.to_vec()).unwrap();
+        ModelFile::parse(&toml::to_string(&v).unwrap())
+    };
+    let three = with_poly(&[1.0, 0.02, -0.001]).unwrap();
+    assert_eq!(three.nonlinear_gain.unwrap().poly, [1.0, 0.02, -0.001, 0.0]);
+    let four = with_poly(&[1.0, 0.02, -0.001, 1e-5]).unwrap();
+    assert_eq!(four.nonlinear_gain.unwrap().poly[3], 1e-5);
+    for bad in [&[1.0, 0.02][..], &[1.0, 0.0, 0.0, 0.0, 0.0]] {
+        let e = with_poly(bad).unwrap_err();
+        assert!(format!("{e:#}").contains("three or four values"), "{e:#}");
+    }
+}
+
 #[test]
 fn model_arrays_of_the_wrong_length_are_refused() {
     let mut v = thesis_full_toml();

@@ -197,10 +197,15 @@ pub fn params_of(m: &ModelFile, effect: &str) -> Vec<(String, f64)> {
             (None, None) => vec![],
         },
         "nonlinear-gain" => m.nonlinear_gain.as_ref().map_or(vec![], |g| {
-            vec![
+            let mut p = vec![
                 ("c1_per_v".into(), g.poly[1]),
                 ("c2_per_v2".into(), g.poly[2]),
-            ]
+            ];
+            // (the cubic term only where a fit gave one: `select`'s scale-or-curvature check)
+            if g.poly[3] != 0.0 {
+                p.push(("c3_per_v3".into(), g.poly[3]));
+            }
+            p
         }),
         "slew-rate-limit" => m
             .slew_rate_limit
@@ -327,7 +332,7 @@ pub fn with_slow(m: &ModelFile, p: &SlowParams, u_range: (f64, f64)) -> Option<M
     }
     if let Some((c1, c2)) = p.gain {
         m.nonlinear_gain = Some(GainSection {
-            poly: [1.0, c1, c2],
+            poly: [1.0, c1, c2, 0.0],
             range_v: [u_range.0, u_range.1],
         });
     }

@@ -75,6 +75,7 @@ pub mod mains;
 pub mod nnls;
 pub mod protocol;
 pub mod report;
+pub mod scale_order;
 pub mod select;
 pub mod shrink;
 pub mod signatures;

@@ -44,8 +44,8 @@
 //! # unsettled_v = -0.26          # optional: the creep had not settled at the records' first
 //! #                               # input (added to every reading; model-gap step 12)
 //!
-//! [nonlinear-gain]                # effect `nonlinear-gain`, K'(u)
-//! poly = [1.0, 0.02, -0.001]
+//! [nonlinear-gain]                # effect `nonlinear-gain`, K'(u), lowest power first
+//! poly = [1.0, 0.02, -0.001]      # (a fourth value, the cubic term, is optional)
 //! range_v = [0.0, 10.0]
 //!
 //! [slew-rate-limit]               # effect `slew-rate-limit`, at the amplifier output
@@ -99,6 +99,22 @@ where
     let len = v.len();
     v.try_into()
         .map_err(|_| serde::de::Error::invalid_length(len, &format!("exactly {N} values").as_str()))
+}
+
+/// Three or four values, the missing fourth 0 (K'(u)'s cubic term, which older files lack).
+fn three_or_four<'de, D>(d: D) -> Result<[f64; 4], D::Error>
+where
+    D: serde::Deserializer<'de>,
+{
+    let v: Vec<f64> = Vec::deserialize(d)?;
+    match v[..] {
+        [a, b, c] => Ok([a, b, c, 0.0]),
+        [a, b, c, e] => Ok([a, b, c, e]),
+        _ => Err(serde::de::Error::invalid_length(
+            v.len(),
+            &"three or four values",
+        )),
+    }
 }
 
 /// `[plant]`.
@@ -193,9 +209,10 @@ pub struct DriftSection {
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct GainSection {
-    /// K'(u), lowest power first.
-    #[serde(deserialize_with = "exact")]
-    pub poly: [f64; 3],
+    /// K'(u), lowest power first: three values (the thesis' quadratic) or four (a cubic
+    /// term, which the model-gap workflow may fit); written with four.
+    #[serde(deserialize_with = "three_or_four")]
+    pub poly: [f64; 4],
     /// Range over which K' is evaluated, V.
     #[serde(deserialize_with = "exact")]
     pub range_v: [f64; 2],

@@ -7,7 +7,7 @@ use model_core::params;
 pub fn k_fast(u_v: f64) -> f64 {
     let x = u_v.clamp(params::FAST_GAIN_U_RANGE_V.0, params::FAST_GAIN_U_RANGE_V.1);
     let c = params::FAST_GAIN_POLY;
-    c[2] * x * x + c[1] * x + c[0]
+    c[3] * x * x * x + c[2] * x * x + c[1] * x + c[0]
 }
 
 /// The fast part's static output, sensor volts.
