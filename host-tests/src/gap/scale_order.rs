@@ -18,6 +18,12 @@
 //! reported. Records that tell them apart show the gain at small inputs (a rest and small steps
 //! from 0 V) beside the large ones.
 //!
+//! Where the scale stays, it may stand in an offset's place (a sine over 2-9 V reads a 20 mV
+//! offset as a 0.4 % scale and a bend): like for like, each beside the cubic curvature with as
+//! many parameters, an offset that leaves less in every record than the scale refitted there
+//! takes its place (`select`, step 14; reported as a pair where the scale leaves no more than
+//! the look-alike bar above it).
+//!
 //! The fit: the simulated output is linear in `c1..c3` and the offset (the sensor adds the
 //! offset; K'(u) enters the fast static map, which the linear plant follows), so Gauss-Newton
 //! on finite-difference columns of the full simulation, computed once, converges in a step or
@@ -27,7 +33,7 @@
 //! it and the scale its reversible slope, a coupling this check does not model.
 
 use super::data::{Data, simulate_all};
-use crate::io::model_file::ModelFile;
+use crate::io::model_file::{ModelFile, OffsetSection};
 use crate::util::par_map;
 use nalgebra::{DMatrix, DVector};
 
@@ -45,66 +51,125 @@ pub const SCALE_ORDER_HALVINGS: usize = 6;
 pub const SCALE_ORDER_SETTLED: f64 = 1e-6;
 
 /// The steps of the finite differences, per parameter: `c1` per volt, `c2` per volt squared,
-/// `c3` per volt cubed, the offset in volts (our assumption: each moves the output by about
-/// 10 mV at 10 V, far above the `f32` simulation's rounding and small enough for the amplifier's
+/// `c3` per volt cubed, the offset in volts, the scale (our assumption: each moves the output
+/// by about 10 mV at 10 V, far above the `f32` simulation's rounding and small enough for the amplifier's
 /// limits to act alike on both points).
-pub const SCALE_ORDER_STEPS: [f64; 4] = [1e-3, 1e-4, 1e-5, 1e-2];
+pub const SCALE_ORDER_STEPS: [f64; 5] = [1e-3, 1e-4, 1e-5, 1e-2, 1e-3];
 
-/// The model without its scale, its curvature refitted one order higher.
-pub struct WithoutScale {
-    /// The refitted model (no `[sensor-gain]`).
+/// A model refitted with K'(u) one order higher.
+pub struct CubicFit {
+    /// The refitted model.
     pub model: ModelFile,
     /// Its simulated outputs, one per record.
     pub sims: Vec<Vec<f64>>,
     /// Its mean squared residual per record.
     pub mse: Vec<f64>,
-    /// The scale it does without.
+    /// The scale taken out (the model's `[sensor-gain]`).
     pub scale: f64,
     /// The cubic term fitted, per volt cubed.
     pub c3_per_v3: f64,
 }
 
-/// `model` without its `[sensor-gain]` and with K'(u) refitted to a cubic (and the offset,
-/// where `named` holds one), where `named` holds both a `sensor-gain` and a `nonlinear-gain`
-/// and no `hysteresis`; `None` otherwise or where no fit simulates.
+/// What stands in the scale's place beside the cubic curvature.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum InPlace {
+    /// Nothing: the scale taken out, the offset refitted where one is named.
+    Nothing,
+    /// An offset the model does not have (the scale taken out).
+    Offset,
+    /// The scale itself, refitted (the like-for-like rival of [`InPlace::Offset`]).
+    Scale,
+}
+
+/// `model` with K'(u) refitted to a cubic and, by `place`, its `[sensor-gain]` taken out
+/// (its factor moved into the drift's gains, which it multiplies as well) or refitted, and
+/// an offset refitted where `named` holds one or `place` adds one; where `named` holds both a
+/// `sensor-gain` and a `nonlinear-gain` and no `hysteresis`. `None` otherwise, with
+/// [`InPlace::Offset`] where the model has an offset, or where no fit simulates.
 pub fn curvature_in_scales_place(
     model: &ModelFile,
     named: &[String],
     data: &[Data],
-) -> Option<WithoutScale> {
+    place: InPlace,
+) -> Option<CubicFit> {
     let has = |e: &str| named.iter().any(|n| n == e);
     if !has("sensor-gain") || !has("nonlinear-gain") || has("hysteresis") {
+        return None;
+    }
+    let has_offset = has("offset") && model.offset.is_some();
+    if place == InPlace::Offset && (has("offset") || model.offset.is_some()) {
         return None;
     }
     let scale = model.sensor_gain.as_ref()?.gain;
     let gain = model.nonlinear_gain.as_ref()?;
     let mut start = model.clone();
-    start.sensor_gain = None;
-    if let Some(d) = start.drift.as_mut() {
-        d.gains = d.gains.map(|g| g * scale);
+    if place != InPlace::Scale {
+        start.sensor_gain = None;
+        if let Some(d) = start.drift.as_mut() {
+            d.gains = d.gains.map(|g| g * scale);
+        }
     }
-    let with_offset = has("offset") && start.offset.is_some();
-    let np = if with_offset { 4 } else { 3 };
+    if place == InPlace::Offset {
+        start.offset = Some(OffsetSection { offset_v: 0.0 });
+    }
+    let free_offset = has_offset || place == InPlace::Offset;
+    // The free parameters, by their index into SCALE_ORDER_STEPS.
+    let mut free: Vec<usize> = vec![0, 1, 2];
+    if free_offset {
+        free.push(3);
+    }
+    if place == InPlace::Scale {
+        free.push(4);
+    }
     let at = |p: &[f64]| -> ModelFile {
         let mut m = start.clone();
         if let Some(g) = m.nonlinear_gain.as_mut() {
             g.poly = [1.0, p[0], p[1], p[2]];
         }
-        if with_offset && let Some(o) = m.offset.as_mut() {
+        if free_offset && let Some(o) = m.offset.as_mut() {
             o.offset_v = p[3];
+        }
+        if place == InPlace::Scale
+            && let Some(g) = m.sensor_gain.as_mut()
+        {
+            g.gain = p[4];
         }
         m
     };
+    let p0 = [
+        gain.poly[1],
+        gain.poly[2],
+        gain.poly[3],
+        start.offset.as_ref().map_or(0.0, |o| o.offset_v),
+        scale,
+    ];
+    let (model, sims, mse, p) = gauss_newton(&at, p0, &free, data)?;
+    Some(CubicFit {
+        model,
+        sims,
+        mse,
+        scale,
+        c3_per_v3: p[2],
+    })
+}
+
+/// Gauss-Newton on the parameters `free` of `p0` (the others held), the model at `p` given by
+/// `at`: the finite-difference columns of the full simulation computed once (the output is
+/// linear in K'(u)'s terms and the offset, and the scale, near 1, couples them weakly), each
+/// step halved until the summed mean squares fall. The model, its simulations and mean squares,
+/// and the parameters.
+#[allow(clippy::type_complexity)]
+fn gauss_newton(
+    at: &(impl Fn(&[f64]) -> ModelFile + Sync),
+    p0: [f64; 5],
+    free: &[usize],
+    data: &[Data],
+) -> Option<(ModelFile, Vec<Vec<f64>>, Vec<f64>, [f64; 5])> {
     let cost = |mse: &[f64]| mse.iter().sum::<f64>();
-    let mut p: Vec<f64> = vec![gain.poly[1], gain.poly[2], gain.poly[3]];
-    if with_offset {
-        p.push(start.offset.as_ref().map_or(0.0, |o| o.offset_v));
-    }
+    let mut p = p0;
     let (mut sims, mut mse) = simulate_all(&at(&p), data).ok()?;
-    // The columns, once: each parameter's finite difference over the full simulation (the
-    // output is linear in them, so they hold at every point the iterations visit).
-    let cols: Vec<Option<Vec<Vec<f64>>>> = par_map(&(0..np).collect::<Vec<_>>(), |&k| {
-        let mut q = p.clone();
+    let cols: Vec<Option<Vec<Vec<f64>>>> = par_map(free, |&k| {
+        let mut q = p;
         q[k] += SCALE_ORDER_STEPS[k];
         let (s, _) = simulate_all(&at(&q), data).ok()?;
         Some(
@@ -120,6 +185,7 @@ pub fn curvature_in_scales_place(
         )
     });
     let cols: Vec<Vec<Vec<f64>>> = cols.into_iter().collect::<Option<_>>()?;
+    let np = free.len();
     // Normal equations, each record weighted by its length (records weigh equally, as the
     // mean squares do).
     let mut a = DMatrix::<f64>::zeros(np, np);
@@ -152,7 +218,10 @@ pub fn curvature_in_scales_place(
         let mut taken = false;
         let mut f = 1.0;
         for _ in 0..SCALE_ORDER_HALVINGS {
-            let q: Vec<f64> = p.iter().zip(step.iter()).map(|(x, s)| x + f * s).collect();
+            let mut q = p;
+            for (j, &k) in free.iter().enumerate() {
+                q[k] += f * step[j];
+            }
             if let Ok((s, m)) = simulate_all(&at(&q), data)
                 && cost(&m) < cost(&mse)
             {
@@ -167,11 +236,5 @@ pub fn curvature_in_scales_place(
             break;
         }
     }
-    Some(WithoutScale {
-        model: at(&p),
-        sims,
-        mse,
-        scale,
-        c3_per_v3: p[2],
-    })
+    Some((at(&p), sims, mse, p))
 }

@@ -28,7 +28,7 @@ use super::everett::CentreLine;
 use super::fast_fit::fit_fast;
 use super::input_noise;
 use super::mains::{self, HumLine};
-use super::scale_order;
+use super::scale_order::{self, InPlace};
 use super::signatures::{self, shows_share};
 use super::slow_fit::{SlowRegressors, fit_slow, slow_regressors, solve_rows};
 use super::start;
@@ -2246,10 +2246,11 @@ fn diagnose_split(
     });
     cannot_tell.extend(ambiguous);
     // Step 14 (before 12 and 13, which read the named set): a scale beside a curvature that a
-    // curvature of one more order does without, leaving alike in every record, is a part of
-    // the curvature's shape the records do not tell from a scale (`scale_order`): the model
-    // with one name fewer is kept, and the pair reported.
-    if let Some(w) = scale_order::curvature_in_scales_place(&model, &named, data)
+    // curvature of one more order does without, leaving no more than the look-alike bar above
+    // what the model leaves in any record, is a part of the curvature's shape the records do
+    // not tell from a scale (`scale_order`): the model with one name fewer is kept, and the
+    // pair reported.
+    if let Some(w) = scale_order::curvature_in_scales_place(&model, &named, data, InPlace::Nothing)
         && leaves_within_of(&w.mse, &cur_mse, &var, STATIC_TELL_RATIO)
     {
         let why = format!(
@@ -2286,6 +2287,61 @@ fn diagnose_split(
             why,
         });
         named.retain(|n| n != "sensor-gain");
+        model = w.model;
+        sims = w.sims;
+        cur_mse = w.mse;
+    } else if let Some(w) =
+        scale_order::curvature_in_scales_place(&model, &named, data, InPlace::Offset)
+        && let Some(v) =
+            scale_order::curvature_in_scales_place(&model, &named, data, InPlace::Scale)
+        && w.mse.iter().zip(&v.mse).all(|(a, b)| a < b)
+    {
+        // Where it does not, the scale may stand in an offset's place: like for like (each
+        // beside the curvature of one more order, as many parameters), an offset that leaves
+        // less in every record is the likelier, and takes the scale's place; where the scale
+        // leaves no more than the look-alike bar above it in any record, the records cannot
+        // tell the two, and the pair is reported.
+        let told = !leaves_within_of(&v.mse, &w.mse, &var, STATIC_TELL_RATIO);
+        let offset_v = w.model.offset.as_ref().map_or(0.0, |o| o.offset_v);
+        let evidence = format!(
+            "swapped in for sensor-gain: beside a curvature of one more order (c3 = {:.3e} per \
+             V^3), an offset of {:.1} mV in the scale's place leaves {:.2} mV against the \
+             scale's {:.2} mV (refitted beside the same curvature), less in every record{}",
+            w.c3_per_v3,
+            1e3 * offset_v,
+            1e3 * rms_of(&w.mse),
+            1e3 * rms_of(&v.mse),
+            if told {
+                ""
+            } else {
+                ", but by less than the look-alike bar: the records cannot tell the two; \
+                 records that start at rest at 0 V read the sensor's zero"
+            }
+        );
+        steps.push(Step {
+            params: params_json(&w.model, "offset"),
+            ..Step::new(
+                "offset".into(),
+                evidence.clone(),
+                &cur_mse,
+                &w.mse,
+                w.sims.clone(),
+            )
+        });
+        cannot_tell.retain(|k| k.neither_named || k.named != "sensor-gain");
+        if !told {
+            cannot_tell.push(CannotTell {
+                named: "offset".into(),
+                alternative: "sensor-gain".into(),
+                neither_named: false,
+                taken_out: TakenOut::No,
+                rms_v: rms_of(&w.mse),
+                alternative_rms_v: rms_of(&v.mse),
+                why: evidence,
+            });
+        }
+        named.retain(|n| n != "sensor-gain");
+        named.push("offset".into());
         model = w.model;
         sims = w.sims;
         cur_mse = w.mse;
@@ -2988,6 +3044,8 @@ mod tests {
     /// found to the `f32` simulation's rounding), and not where the scale is true (a 2 % scale
     /// beside the thesis' quadratic K'(u), on a sine over 0.5-9.5 V, which reaches small
     /// inputs: the cubic alone leaves far more than the look-alike bar over a 1 mV floor).
+    /// Like for like (each beside the cubic), an offset in the scale's place leaves less where
+    /// the truth has an offset (found to 10 uV) and more where it has the scale.
     #[test]
     fn a_scale_gives_way_to_a_curvature_of_one_more_order_only_where_it_leaves_as_little() {
         use crate::io::model_file::{GainSection, SensorGainSection};
@@ -3022,7 +3080,8 @@ mod tests {
         given.nonlinear_gain = gain([1.0, 0.01, -0.002, 0.0]);
         given.sensor_gain = Some(SensorGainSection { gain: 1.003 });
         let (_, given_mse) = simulate_all(&given, &data).unwrap();
-        let w = scale_order::curvature_in_scales_place(&given, &both, &data).unwrap();
+        let w =
+            scale_order::curvature_in_scales_place(&given, &both, &data, InPlace::Nothing).unwrap();
         assert!(w.model.sensor_gain.is_none());
         let poly = w.model.nonlinear_gain.as_ref().unwrap().poly;
         assert!((poly[3] - 1e-4).abs() < 1e-7, "{poly:?}");
@@ -3035,20 +3094,56 @@ mod tests {
         ));
         // Only where both are named and no table is (K'(u) scales a table: not modelled here).
         let with_table = named(&["hysteresis", "nonlinear-gain", "sensor-gain"]);
-        assert!(scale_order::curvature_in_scales_place(&given, &with_table, &data).is_none());
-        assert!(scale_order::curvature_in_scales_place(&given, &both[..1], &data).is_none());
+        assert!(
+            scale_order::curvature_in_scales_place(&given, &with_table, &data, InPlace::Nothing)
+                .is_none()
+        );
+        assert!(
+            scale_order::curvature_in_scales_place(&given, &both[..1], &data, InPlace::Nothing)
+                .is_none()
+        );
         // A true 2 % scale beside the thesis' quadratic.
         let mut truth = ModelFile::built_in("thesis-linear").unwrap();
         truth.nonlinear_gain = gain(model_core::params::FAST_GAIN_POLY);
         truth.sensor_gain = Some(SensorGainSection { gain: 1.02 });
         let data = sine(&truth);
         let (_, exact) = simulate_all(&truth, &data).unwrap();
-        let w = scale_order::curvature_in_scales_place(&truth, &both, &data).unwrap();
+        let w =
+            scale_order::curvature_in_scales_place(&truth, &both, &data, InPlace::Nothing).unwrap();
         println!(
             "a true 2 % scale: the cubic leaves {:.2} mV",
             1e3 * w.mse[0].sqrt()
         );
         assert!(!leaves_within_of(&w.mse, &exact, &var, STATIC_TELL_RATIO));
+        // Like for like, the true scale beside the cubic leaves less than an offset there.
+        let off = scale_order::curvature_in_scales_place(&truth, &both, &data, InPlace::Offset);
+        let sc = scale_order::curvature_in_scales_place(&truth, &both, &data, InPlace::Scale);
+        let (off, sc) = (off.unwrap(), sc.unwrap());
+        assert!(sc.mse[0] < off.mse[0], "{:?} {:?}", sc.mse, off.mse);
+        assert!((sc.model.sensor_gain.as_ref().unwrap().gain - 1.02).abs() < 1e-4);
+        // A cubic truth with a 25 mV offset, given as the quadratic and a scale: the offset
+        // in the scale's place leaves less (and is found), and none is added where one is
+        // named.
+        let mut truth = ModelFile::built_in("thesis-linear").unwrap();
+        truth.nonlinear_gain = gain([1.0, 0.01, -0.002, 1e-4]);
+        truth.offset = Some(crate::io::model_file::OffsetSection { offset_v: 0.025 });
+        let data = sine(&truth);
+        let mut given = truth.clone();
+        given.nonlinear_gain = gain([1.0, 0.01, -0.002, 0.0]);
+        given.offset = None;
+        given.sensor_gain = Some(SensorGainSection { gain: 1.003 });
+        let off = scale_order::curvature_in_scales_place(&given, &both, &data, InPlace::Offset);
+        let sc = scale_order::curvature_in_scales_place(&given, &both, &data, InPlace::Scale);
+        let (off, sc) = (off.unwrap(), sc.unwrap());
+        assert!(off.mse[0] < sc.mse[0], "{:?} {:?}", off.mse, sc.mse);
+        assert!(off.model.sensor_gain.is_none());
+        let offset_v = off.model.offset.as_ref().unwrap().offset_v;
+        assert!((offset_v - 0.025).abs() < 1e-5, "{offset_v}");
+        let with_offset = named(&["nonlinear-gain", "sensor-gain", "offset"]);
+        assert!(
+            scale_order::curvature_in_scales_place(&truth, &with_offset, &data, InPlace::Offset)
+                .is_none()
+        );
     }
 
     /// Step 12 reads an offset as the drift's start only where it is the settled creep at
