@@ -745,7 +745,8 @@ fn leaves_within_of(a: &[f64], b: &[f64], var: &[f64], ratio: f64) -> bool {
     (0..var.len()).all(|i| {
         let la = (a[i] - var[i]).max(0.0) + var[i];
         let lb = (b[i] - var[i]).max(0.0) + var[i];
-        la <= ratio * lb
+        // (a fit that simulates to NaN leaves no less than anything)
+        a[i].is_finite() && la <= ratio * lb
     })
 }
 
@@ -2227,29 +2228,11 @@ fn diagnose_split(
             });
         }
     }
-    let mut cannot_tell = cannot_tell(&model, base, &named, data, &slow_x, u_range, &cur_mse);
-    // A pair left unnamed at one step whose shape a later step named (told apart then, by the
-    // held levels or because the rival no longer explained alike), or the same step beside an
-    // offset, is no longer a pair the records cannot tell.
-    // A drift that gave way stays reported unless a later step named it.
-    ambiguous.retain(|c| {
-        if c.neither_named {
-            !named.contains(&c.named) && !named.contains(&c.alternative)
-        } else {
-            // (a drift that gave way to a shape a later look-alike step dropped: that step's
-            // own pair says so; a pair the final check made beside a table the final check
-            // took out later no longer stands)
-            !named.contains(&c.alternative)
-                && (c.alternative != "drift" || named.contains(&c.named))
-                && (c.taken_out == TakenOut::No || named.contains(&c.named))
-        }
-    });
-    cannot_tell.extend(ambiguous);
-    // Step 14 (before 12 and 13, which read the named set): a scale beside a curvature that a
-    // curvature of one more order does without, leaving no more than the look-alike bar above
-    // what the model leaves in any record, is a part of the curvature's shape the records do
-    // not tell from a scale (`scale_order`): the model with one name fewer is kept, and the
-    // pair reported.
+    // Step 14 (before the pairs are settled, and before steps 12 and 13, which read the named
+    // set): a scale beside a curvature that a curvature of one more order does without,
+    // leaving no more than the look-alike bar above what the model leaves in any record, is a
+    // part of the curvature's shape the records do not tell from a scale (`scale_order`): the
+    // model with one name fewer is kept, and the pair reported.
     if let Some(w) = scale_order::curvature_in_scales_place(&model, &named, data, InPlace::Nothing)
         && leaves_within_of(&w.mse, &cur_mse, &var, STATIC_TELL_RATIO)
     {
@@ -2267,6 +2250,7 @@ fn diagnose_split(
         );
         steps.push(Step {
             removed: true,
+            params: params_json(&w.model, "nonlinear-gain"),
             ..Step::new(
                 "sensor-gain".into(),
                 why.clone(),
@@ -2276,8 +2260,8 @@ fn diagnose_split(
             )
         });
         // (a pair that named the scale no longer stands)
-        cannot_tell.retain(|k| k.neither_named || k.named != "sensor-gain");
-        cannot_tell.push(CannotTell {
+        ambiguous.retain(|k| k.neither_named || k.named != "sensor-gain");
+        ambiguous.push(CannotTell {
             named: "nonlinear-gain".into(),
             alternative: "sensor-gain".into(),
             neither_named: false,
@@ -2295,6 +2279,7 @@ fn diagnose_split(
         && let Some(v) =
             scale_order::curvature_in_scales_place(&model, &named, data, InPlace::Scale)
         && w.mse.iter().zip(&v.mse).all(|(a, b)| a < b)
+        && no_record_worse(&w.mse, &cur_mse)
     {
         // Where it does not, the scale may stand in an offset's place: like for like (each
         // beside the curvature of one more order, as many parameters), an offset that leaves
@@ -2318,8 +2303,10 @@ fn diagnose_split(
                  records that start at rest at 0 V read the sensor's zero"
             }
         );
+        let mut params = params_json(&w.model, "offset");
+        params.extend(params_json(&w.model, "nonlinear-gain"));
         steps.push(Step {
-            params: params_json(&w.model, "offset"),
+            params,
             ..Step::new(
                 "offset".into(),
                 evidence.clone(),
@@ -2328,9 +2315,9 @@ fn diagnose_split(
                 w.sims.clone(),
             )
         });
-        cannot_tell.retain(|k| k.neither_named || k.named != "sensor-gain");
+        ambiguous.retain(|k| k.neither_named || k.named != "sensor-gain");
         if !told {
-            cannot_tell.push(CannotTell {
+            ambiguous.push(CannotTell {
                 named: "offset".into(),
                 alternative: "sensor-gain".into(),
                 neither_named: false,
@@ -2346,6 +2333,24 @@ fn diagnose_split(
         sims = w.sims;
         cur_mse = w.mse;
     }
+    let mut cannot_tell = cannot_tell(&model, base, &named, data, &slow_x, u_range, &cur_mse);
+    // A pair left unnamed at one step whose shape a later step named (told apart then, by the
+    // held levels or because the rival no longer explained alike), or the same step beside an
+    // offset, is no longer a pair the records cannot tell.
+    // A drift that gave way stays reported unless a later step named it.
+    ambiguous.retain(|c| {
+        if c.neither_named {
+            !named.contains(&c.named) && !named.contains(&c.alternative)
+        } else {
+            // (a drift that gave way to a shape a later look-alike step dropped: that step's
+            // own pair says so; a pair the final check made beside a table the final check
+            // took out later no longer stands)
+            !named.contains(&c.alternative)
+                && (c.alternative != "drift" || named.contains(&c.named))
+                && (c.taken_out == TakenOut::No || named.contains(&c.named))
+        }
+    });
+    cannot_tell.extend(ambiguous);
     // Step 12: an offset that is the settled creep at the records' first input taken back is
     // the drift's start (the creep counts from the first input), not the sensor's zero: the
     // constant moves into `[drift] unsettled_v` (the same readings), the offset is no longer
@@ -2383,6 +2388,8 @@ fn diagnose_split(
             c.first_input_v,
             100.0 * CREEP_START_SHARE
         );
+        // (a pair that named the offset no longer stands: it is not named)
+        cannot_tell.retain(|k| k.neither_named || k.named != "offset");
         offset_moved(
             (&mut steps, &mut cannot_tell),
             "drift",
