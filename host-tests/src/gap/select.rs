@@ -731,11 +731,7 @@ fn alike_in_every_record(a: &[f64], b: &[f64], var: &[f64]) -> bool {
 /// Does each of two fits leave, in every record, at most `ratio` times what the other leaves
 /// above the noise floor (plus one noise variance)?
 fn leave_within(a: &[f64], b: &[f64], var: &[f64], ratio: f64) -> bool {
-    (0..var.len()).all(|i| {
-        let la = (a[i] - var[i]).max(0.0) + var[i];
-        let lb = (b[i] - var[i]).max(0.0) + var[i];
-        la <= ratio * lb && lb <= ratio * la
-    })
+    leaves_within_of(a, b, var, ratio) && leaves_within_of(b, a, var, ratio)
 }
 
 /// Does a fit leave, in every record, at most `ratio` times what another leaves above the
