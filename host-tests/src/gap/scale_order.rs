@@ -245,3 +245,55 @@ fn gauss_newton(
     }
     Some((at(&p), sims, mse, p))
 }
+
+/// `model` without its `[offset]`, K'(u) refitted to a cubic (and the scale, where one is
+/// named): an offset beside a curvature that a curvature of one more order may do without
+/// (`select`, step 14 (c)). Where `named` holds `offset` and `nonlinear-gain` and neither a
+/// `hysteresis` (a table's constant is step 13's) nor a `drift` (a creep's start is step
+/// 12's); `None` otherwise, or where no fit simulates. The cubic fit's `scale` is the scale
+/// the model keeps (1 where none is named).
+pub fn curvature_in_offsets_place(
+    model: &ModelFile,
+    named: &[String],
+    data: &[Data],
+) -> Option<CubicFit> {
+    let has = |e: &str| named.iter().any(|n| n == e);
+    if !has("offset")
+        || !has("nonlinear-gain")
+        || has("hysteresis")
+        || has("drift")
+        || catalogue::present(model, "hysteresis")
+        || catalogue::present(model, "drift")
+    {
+        return None;
+    }
+    model.offset.as_ref()?;
+    let gain = model.nonlinear_gain.as_ref()?;
+    let scaled = has("sensor-gain") && model.sensor_gain.is_some();
+    let scale = model.sensor_gain.as_ref().map_or(1.0, |g| g.gain);
+    let mut start = model.clone();
+    start.offset = None;
+    let mut free: Vec<usize> = vec![0, 1, 2];
+    if scaled {
+        free.push(4);
+    }
+    let at = |p: &[f64]| -> ModelFile {
+        let mut m = start.clone();
+        if let Some(g) = m.nonlinear_gain.as_mut() {
+            g.poly = [1.0, p[0], p[1], p[2]];
+        }
+        if scaled && let Some(g) = m.sensor_gain.as_mut() {
+            g.gain = p[4];
+        }
+        m
+    };
+    let p0 = [gain.poly[1], gain.poly[2], gain.poly[3], 0.0, scale];
+    let (model, sims, mse, p) = gauss_newton(&at, p0, &free, data)?;
+    Some(CubicFit {
+        model,
+        sims,
+        mse,
+        scale: p[4],
+        c3_per_v3: p[2],
+    })
+}
