@@ -571,7 +571,13 @@ fn run_suite() -> Option<Tally> {
 /// least 81 % exact named sets with at most 1.9 % false names, at least 97 % of the
 /// correctly named effects meeting the residual cut (`gap::shrink`), and at least 95 %
 /// of the cases exact or honest, in release with the default 100 cases (`GAP_CASES` and
-/// `GAP_FIRST` unset). Measured in session 44 (a scale beside a curvature gives way to a
+/// `GAP_FIRST` unset). Measured in session 45 (without holds a drift gives way to a shape
+/// fitted with an offset; an offset beside a curvature that a cubic does without; beside a
+/// loop the simplest of the static shapes alike in each other's place, `select.rs` steps 9,
+/// 14 (c) and 15): 83.0 % exact, 0 false names of 104, 0 of 15 clean cases named, 97 exact
+/// or honest, the cut 103 of 104 (1006's true scale beside a loop now missed: an offset and a
+/// curvature left clearly less in its place); on seeds 1700-1899, run for the first time
+/// before and after it: 82.0 -> 83.5 % exact, 16 -> 13 false names. Measured in session 44 (a scale beside a curvature gives way to a
 /// curvature of one more order where that leaves as little, `gap::scale_order`: 1079's false
 /// scale gone): 84.0 % exact, 0 false names of 105, 0 of 15 clean cases named, 98 exact or
 /// honest, the cut 104 of 105; on seeds 1500-1699, run for the first time before and after
@@ -615,7 +621,7 @@ fn randomised_families_hold_their_measured_rates() {
     suite_meets(
         [81.0, 1.9, 97.0, 95.0],
         full_run,
-        "the measured 84 %, 0.0 %, 99.0 % and 98 % with their margins",
+        "the measured 83 %, 0.0 %, 99.0 % and 97 % with their margins",
     );
 }
 
