@@ -119,30 +119,6 @@ pub fn curvature_in_scales_place(
     if place == InPlace::Offset {
         start.offset = Some(OffsetSection { offset_v: 0.0 });
     }
-    let free_offset = has_offset || place == InPlace::Offset;
-    // The free parameters, by their index into SCALE_ORDER_STEPS.
-    let mut free: Vec<usize> = vec![0, 1, 2];
-    if free_offset {
-        free.push(3);
-    }
-    if place == InPlace::Scale {
-        free.push(4);
-    }
-    let at = |p: &[f64]| -> ModelFile {
-        let mut m = start.clone();
-        if let Some(g) = m.nonlinear_gain.as_mut() {
-            g.poly = [1.0, p[0], p[1], p[2]];
-        }
-        if free_offset && let Some(o) = m.offset.as_mut() {
-            o.offset_v = p[3];
-        }
-        if place == InPlace::Scale
-            && let Some(g) = m.sensor_gain.as_mut()
-        {
-            g.gain = p[4];
-        }
-        m
-    };
     let p0 = [
         gain.poly[1],
         gain.poly[2],
@@ -150,7 +126,8 @@ pub fn curvature_in_scales_place(
         start.offset.as_ref().map_or(0.0, |o| o.offset_v),
         scale,
     ];
-    let (model, sims, mse, p) = gauss_newton(&at, p0, &free, data)?;
+    let free_offset = has_offset || place == InPlace::Offset;
+    let (model, sims, mse, p) = fit_cubic(&start, p0, free_offset, place == InPlace::Scale, data)?;
     Some(CubicFit {
         model,
         sims,
@@ -158,6 +135,40 @@ pub fn curvature_in_scales_place(
         scale,
         c3_per_v3: p[2],
     })
+}
+
+/// `start` with K'(u) refitted to a cubic from `p0` (`c1..c3`, the offset, the scale), with
+/// its offset and its scale free where asked (`gauss_newton`); the others held.
+#[allow(clippy::type_complexity)]
+fn fit_cubic(
+    start: &ModelFile,
+    p0: [f64; 5],
+    offset: bool,
+    scale: bool,
+    data: &[Data],
+) -> Option<(ModelFile, Vec<Vec<f64>>, Vec<f64>, [f64; 5])> {
+    // The free parameters, by their index into SCALE_ORDER_STEPS.
+    let mut free: Vec<usize> = vec![0, 1, 2];
+    if offset {
+        free.push(3);
+    }
+    if scale {
+        free.push(4);
+    }
+    let at = |p: &[f64]| -> ModelFile {
+        let mut m = start.clone();
+        if let Some(g) = m.nonlinear_gain.as_mut() {
+            g.poly = [1.0, p[0], p[1], p[2]];
+        }
+        if offset && let Some(o) = m.offset.as_mut() {
+            o.offset_v = p[3];
+        }
+        if scale && let Some(g) = m.sensor_gain.as_mut() {
+            g.gain = p[4];
+        }
+        m
+    };
+    gauss_newton(&at, p0, &free, data)
 }
 
 /// Gauss-Newton on the parameters `free` of `p0` (the others held), the model at `p` given by
@@ -273,22 +284,8 @@ pub fn curvature_in_offsets_place(
     let scale = model.sensor_gain.as_ref().map_or(1.0, |g| g.gain);
     let mut start = model.clone();
     start.offset = None;
-    let mut free: Vec<usize> = vec![0, 1, 2];
-    if scaled {
-        free.push(4);
-    }
-    let at = |p: &[f64]| -> ModelFile {
-        let mut m = start.clone();
-        if let Some(g) = m.nonlinear_gain.as_mut() {
-            g.poly = [1.0, p[0], p[1], p[2]];
-        }
-        if scaled && let Some(g) = m.sensor_gain.as_mut() {
-            g.gain = p[4];
-        }
-        m
-    };
     let p0 = [gain.poly[1], gain.poly[2], gain.poly[3], 0.0, scale];
-    let (model, sims, mse, p) = gauss_newton(&at, p0, &free, data)?;
+    let (model, sims, mse, p) = fit_cubic(&start, p0, false, scaled, data)?;
     Some(CubicFit {
         model,
         sims,

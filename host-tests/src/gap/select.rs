@@ -1263,6 +1263,32 @@ fn diagnose_split(
             });
             (score, explained, harmless)
         };
+        // Static shapes fitted jointly with an offset (`static_pairs`), judged as a step's
+        // candidates (admissible: a lower score, the share explained, no record harmed); the
+        // callers add their own bars.
+        let judge_pairs = |pairs: &[(String, String)]| -> Vec<(Candidate, f64, f64, bool)> {
+            let fitted = par_map(pairs, |(a, b)| {
+                fit_slow_set(&model, data, &slow_x, &[a.as_str(), b.as_str()], u_range)
+            });
+            pairs
+                .iter()
+                .zip(fitted)
+                .filter_map(|((a, b), f)| {
+                    let (m, sims, mse_v) = f?;
+                    let c = Candidate {
+                        effect: format!("{a}+{b}"),
+                        refit: false,
+                        model: m,
+                        k: catalogue::param_count(a) + catalogue::param_count(b),
+                        sims,
+                        mse: mse_v,
+                    };
+                    let (score, explained, harmless) = judge(&c, &all_set);
+                    let ok = score < 0.0 && explained >= MIN_EXPLAINED && harmless;
+                    Some((c, score, explained, ok))
+                })
+                .collect()
+        };
         let mut scored = Vec::new();
         // The look-alikes a pair step stands for (`static_pairs`).
         let mut pair_note: Option<Vec<String>> = None;
@@ -1364,32 +1390,11 @@ fn diagnose_split(
                     .filter(|s| !named.iter().any(|n| n == *s))
                     .map(|s| s.to_string())
                     .collect();
-                let pairs = static_pairs(&shapes, &named, &model);
-                let fitted = par_map(&pairs, |(a, b)| {
-                    fit_slow_set(&model, data, &slow_x, &[a.as_str(), b.as_str()], u_range)
-                });
+                let judged = judge_pairs(&static_pairs(&shapes, &named, &model));
                 let (d_ex, d_mse, d_rms) = {
                     let d = &scored[di];
                     (d.2, d.0.mse.clone(), rms_of(&d.0.mse))
                 };
-                let judged: Vec<(Candidate, f64, f64, bool)> = pairs
-                    .iter()
-                    .zip(fitted)
-                    .filter_map(|((a, b), f)| {
-                        let (m, sims, mse_v) = f?;
-                        let c = Candidate {
-                            effect: format!("{a}+{b}"),
-                            refit: false,
-                            model: m,
-                            k: catalogue::param_count(a) + catalogue::param_count(b),
-                            sims,
-                            mse: mse_v,
-                        };
-                        let (score, explained, harmless) = judge(&c, &all_set);
-                        let ok = score < 0.0 && explained >= MIN_EXPLAINED && harmless;
-                        Some((c, score, explained, ok))
-                    })
-                    .collect();
                 if let Some(t) = tried.last_mut() {
                     t.extend(
                         judged
@@ -1587,33 +1592,12 @@ fn diagnose_split(
                         .zip(&var)
                         .any(|(m, v)| *m > PAIR_FLOOR_RATIO * PAIR_FLOOR_RATIO * v)
                 {
-                    let pairs = static_pairs(&drop, &named, &model);
-                    let fitted = par_map(&pairs, |(a, b)| {
-                        fit_slow_set(&model, data, &slow_x, &[a.as_str(), b.as_str()], u_range)
-                    });
-                    let mut judged: Vec<(Candidate, f64, f64, bool)> = pairs
-                        .iter()
-                        .zip(fitted)
-                        .filter_map(|((a, b), f)| {
-                            let (m, sims, mse_v) = f?;
-                            let c = Candidate {
-                                effect: format!("{a}+{b}"),
-                                refit: false,
-                                model: m,
-                                k: catalogue::param_count(a) + catalogue::param_count(b),
-                                sims,
-                                mse: mse_v,
-                            };
-                            let (score, explained, harmless) = judge(&c, &all_set);
-                            // Admissible, and better than the look-alikes alone by the score,
-                            // which counts the offset's parameter.
-                            let ok = score < 0.0
-                                && score < best_dropped
-                                && explained >= MIN_EXPLAINED
-                                && harmless;
-                            Some((c, score, explained, ok))
-                        })
-                        .collect();
+                    // Admissible, and better than the look-alikes alone by the score, which
+                    // counts the offset's parameter.
+                    let mut judged = judge_pairs(&static_pairs(&drop, &named, &model));
+                    for x in judged.iter_mut() {
+                        x.3 = x.3 && x.1 < best_dropped;
+                    }
                     if let Some(t) = tried.last_mut() {
                         t.extend(
                             judged
@@ -3348,6 +3332,11 @@ mod tests {
         vec![Data::from_record("sine.csv", rec(y)).unwrap()]
     }
 
+    /// Effect names as the workflow keeps them.
+    fn named(s: &[&str]) -> Vec<String> {
+        s.iter().map(|x| x.to_string()).collect()
+    }
+
     /// A K'(u) of coefficients `poly` over 0..10 V.
     fn gain(poly: [f64; 4]) -> Option<crate::io::model_file::GainSection> {
         Some(crate::io::model_file::GainSection {
@@ -3366,7 +3355,6 @@ mod tests {
     #[test]
     fn a_scale_gives_way_to_a_curvature_of_one_more_order_only_where_it_leaves_as_little() {
         use crate::io::model_file::SensorGainSection;
-        let named = |s: &[&str]| s.iter().map(|x| x.to_string()).collect::<Vec<String>>();
         let both = named(&["nonlinear-gain", "sensor-gain"]);
         let var = [1e-6];
         // A cubic truth, given as the quadratic and a scale.
@@ -3450,7 +3438,6 @@ mod tests {
     #[test]
     fn an_offset_gives_way_to_a_curvature_of_one_more_order_only_where_it_leaves_as_little() {
         use crate::io::model_file::OffsetSection;
-        let named = |s: &[&str]| s.iter().map(|x| x.to_string()).collect::<Vec<String>>();
         let both = named(&["nonlinear-gain", "offset"]);
         // 1 mV of noise: the families' records.
         let var = [1e-6];
