@@ -1373,3 +1373,45 @@ fn beside_a_loop_the_simplest_of_alike_static_shapes_is_named() {
         d.table()
     );
 }
+
+/// GAP.md step 16: a table is memory, and its gate is read on what a map of the input alone
+/// leaves. A tanh or softplus curvature with an offset on a chirp (seeds 1699 and 1356), read
+/// against the input in the chirp's faster octaves, drew a loop of 3-6 mV through the stage's
+/// dynamics, and the table's memoryless parts took the curvature: `hysteresis` was named alone
+/// at the floor. The memoryless twin leaves no loop there, the table is not admissible, and the
+/// truth's two shapes are named. A stage's loop is left whole by any map: the twin's trace
+/// entry of a loop case (seed 1615, a Prandtl-Ishlinskii loop on random levels) says the loop
+/// is shown, and hysteresis is named.
+#[test]
+fn a_static_curvature_on_a_chirp_is_not_a_loop() {
+    let base = ModelFile::built_in("thesis-linear").unwrap();
+    for seed in [1699, 1356] {
+        let data = Case::draw(seed).records();
+        let d = diagnose(&base, &data, &Options::default()).expect("diagnosis");
+        let mut named = d.named.clone();
+        named.sort();
+        assert_eq!(
+            named,
+            ["nonlinear-gain", "offset"],
+            "seed {seed}: {}",
+            d.table()
+        );
+        // (the first step's twin left no loop: its gate said no)
+        let twin = d.tried[0]
+            .iter()
+            .find(|t| t.0 == gap::memory::TWIN_NAME)
+            .unwrap_or_else(|| panic!("seed {seed}: no twin at step 1"));
+        assert!(!twin.3, "seed {seed}: {twin:?}");
+        assert!(d.final_rms_v < 1.5 * d.noise_floor_v, "seed {seed}");
+    }
+    let data = Case::draw(1615).records();
+    let d = diagnose(&base, &data, &Options::default()).expect("diagnosis");
+    assert!(d.named.iter().any(|n| n == "hysteresis"), "{}", d.table());
+    let twin = d
+        .tried
+        .iter()
+        .flatten()
+        .find(|t| t.0 == gap::memory::TWIN_NAME)
+        .expect("a twin of the loop");
+    assert!(twin.3, "{twin:?}");
+}

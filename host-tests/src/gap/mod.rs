@@ -56,6 +56,8 @@
 //!   step 4;
 //! * [`everett`]: the hysteresis form, weights on a basis that is the model-core Everett
 //!   table's own response; [`start`]: the table's memory at the start of the records;
+//!   [`memory`]: whether the records' loop needs memory at all (a hysteresis candidate's
+//!   memoryless twin);
 //! * [`select`]: the greedy driver: candidates, scores, selection, the final check (steps 4-6);
 //! * [`report`]: the table and the HTML report of a [`Diagnosis`]; [`unexplained`]: what is
 //!   left above twice the floor and where (never silent); [`shrink`]: how far each named
@@ -72,6 +74,7 @@ pub mod everett;
 pub mod fast_fit;
 pub mod input_noise;
 pub mod mains;
+pub mod memory;
 pub mod nnls;
 pub mod protocol;
 pub mod report;

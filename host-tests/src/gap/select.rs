@@ -28,6 +28,7 @@ use super::everett::CentreLine;
 use super::fast_fit::fit_fast;
 use super::input_noise;
 use super::mains::{self, HumLine};
+use super::memory;
 use super::scale_order::{self, InPlace};
 use super::signatures::{self, shows_share};
 use super::slow_fit::{SlowRegressors, fit_slow, slow_regressors, solve_rows};
@@ -1292,6 +1293,8 @@ fn diagnose_split(
         let mut scored = Vec::new();
         // The look-alikes a pair step stands for (`static_pairs`).
         let mut pair_note: Option<Vec<String>> = None;
+        // (step 16: the memoryless twin of an admissible new table, for the trace)
+        let mut twin_tried: Option<(String, f64, f64, bool)> = None;
         for c in cands {
             let set = if FAST.contains(&c.effect.as_str()) {
                 &fast_set
@@ -1300,13 +1303,43 @@ fn diagnose_split(
             };
             let (score, explained, harmless) = judge(&c, set);
             let sig_ok = c.effect.split('+').all(|e| sigs.supports(e, &c.model));
-            let ok = score < 0.0 && explained >= MIN_EXPLAINED && sig_ok && harmless;
+            let mut ok = score < 0.0 && explained >= MIN_EXPLAINED && sig_ok && harmless;
+            // Step 16: a table is memory; its gate is read again on what a map of the input
+            // alone leaves, where a loop a static misfit drew through the dynamics is gone
+            // (`memory`).
+            if ok
+                && c.effect == "hysteresis"
+                && !c.refit
+                && let Some((t_sims, t_mse)) = memory::twin(
+                    &model,
+                    data,
+                    &sims,
+                    slow_x.fit_input(),
+                    slow_x.range(),
+                    slow_x.table_gain(),
+                )
+            {
+                let shown =
+                    signatures::compute(data, &t_sims, &noise).supports("hysteresis", &c.model);
+                let twin = Candidate {
+                    effect: memory::TWIN_NAME.into(),
+                    refit: false,
+                    model: model.clone(),
+                    k: 0,
+                    sims: Vec::new(),
+                    mse: t_mse,
+                };
+                let (t_score, t_explained, _) = judge(&twin, set);
+                twin_tried = Some((twin.effect, t_score, t_explained, shown));
+                ok = shown;
+            }
             scored.push((c, score, explained, ok));
         }
         tried.push(
             scored
                 .iter()
                 .map(|(c, s, e, ok)| (c.effect.clone(), *s, *e, *ok))
+                .chain(twin_tried)
                 .collect(),
         );
         not_searched.push(

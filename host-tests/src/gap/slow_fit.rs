@@ -172,6 +172,13 @@ impl SlowRegressors {
     pub fn table_gain(&self) -> f64 {
         self.table_gain
     }
+
+    /// Per record, the rows the solve uses and the input its static columns are computed
+    /// from (the recorded input delayed by the stage's group delay): what a memoryless map
+    /// beside the basis is fitted on ([`super::memory::twin`]).
+    pub fn fit_input(&self) -> (&[Vec<usize>], &[Vec<f64>]) {
+        (&self.rows, &self.u_fit)
+    }
 }
 
 /// Rows of one record the slow solve uses at most (our assumption: the slow effects change
