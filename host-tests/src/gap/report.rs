@@ -163,7 +163,8 @@ impl Diagnosis {
 /// stand (there, the shapes that could have done its work, [`TakenOut::InOffsetsPlace`]);
 /// else static shapes the final check took out below their bars beside a table
 /// ([`TakenOut::BelowBar`]): they took part of the residual, but the others' refit, the
-/// table's among them, took up most of the same work.
+/// table's among them, took up most of the same work. Static shapes taken out beside a table
+/// as ones the records do not tell from the loop ([`TakenOut::Untold`]) come first.
 pub(super) fn unexplained_words(final_rms_v: f64, pairs: &[CannotTell]) -> String {
     let taken_out = pairs.iter().find(|c| {
         c.taken_out == TakenOut::Unshown
@@ -210,7 +211,21 @@ pub(super) fn unexplained_words(final_rms_v: f64, pairs: &[CannotTell]) -> Strin
         .filter(|c| c.taken_out == TakenOut::BelowBar)
         .map(|c| format!("{} / {}", c.named, c.alternative))
         .collect();
+    // Static shapes taken out beside a table as ones the records do not tell from the loop
+    // (GAP.md step 17): they took part of it, and a loop of another form could leave it.
+    let untold: Vec<String> = pairs
+        .iter()
+        .filter(|c| c.taken_out == TakenOut::Untold)
+        .map(|c| format!("{} / {}", c.named, c.alternative))
+        .collect();
     match taken_out {
+        None if !untold.is_empty() => format!(
+            "no catalogued effect is admissible that the records tell from the loop: a static \
+             shape beside the table took part of it, but a loop of another form than the \
+             table's leaves a centre line and a constant of its own, and these records have no \
+             held levels or rest at 0 V to tell the two ({} above)",
+            pairs_words(&untold)
+        ),
         None if !alike.is_empty() => alike_words("no catalogued effect is admissible on its own: "),
         None if !in_place.is_empty() => format!(
             "no catalogued effect is admissible that the records show: the final check took out \
