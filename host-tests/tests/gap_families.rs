@@ -1345,7 +1345,8 @@ fn a_drift_without_holds_gives_way_to_a_shape_with_an_offset() {
 /// other's place: the one with the fewest parameters is named (seed 1615, a
 /// Prandtl-Ishlinskii loop and a 1.1 % scale on random levels, where a curvature was named),
 /// and where two have as few, neither (seed 1684, a Preisach loop alone on one long sine,
-/// where a scale was named and an offset and a curvature left as little).
+/// where a scale was named and an offset and a curvature left as little; since session 46
+/// the scale a later step names there goes by step 17, reported beside the loop).
 #[test]
 fn beside_a_loop_the_simplest_of_alike_static_shapes_is_named() {
     let base = ModelFile::built_in("thesis-linear").unwrap();
@@ -1365,10 +1366,13 @@ fn beside_a_loop_the_simplest_of_alike_static_shapes_is_named() {
         && !c.neither_named));
     let d = run(1684);
     assert_eq!(d.named, ["hysteresis"], "{}", d.table());
+    // (since session 46 the scale a step named there goes by step 17, the records having no
+    // held level to tell it from the loop's centre line, and the pair says so)
     assert!(
         d.cannot_tell
             .iter()
-            .any(|c| c.named == "sensor-gain" && c.neither_named),
+            .any(|c| (c.named == "sensor-gain" && c.neither_named)
+                || (c.named == "hysteresis" && c.alternative == "sensor-gain")),
         "{}",
         d.table()
     );
