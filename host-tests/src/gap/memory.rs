@@ -62,7 +62,7 @@ fn twin_map(
     let n = GRID_NODES;
     let (lo, hi) = range;
     let step = (hi - lo) / (n - 1) as f64;
-    if !(step > 0.0) {
+    if step.is_nan() || step <= 0.0 {
         return None;
     }
     let mut a = DMatrix::<f64>::zeros(n, n);
@@ -211,7 +211,7 @@ mod tests {
                 .collect();
             let rows: Vec<Vec<usize>> = vec![(0..data[0].len()).collect()];
             let u_fit = vec![data[0].u_v.clone()];
-            let var = vec![1e-6];
+            let var = [1e-6];
             let (twin_sims, mse) = twin(
                 &base,
                 &data,
