@@ -1782,7 +1782,6 @@ fn diagnose_split(
         if pair.iter().all(|p| named.iter().any(|n| n == p)) {
             units.push(pair.iter().map(|p| p.to_string()).collect());
         }
-
         let left_slow = |unit: &Vec<String>| -> Vec<&str> {
             named
                 .iter()
@@ -1824,7 +1823,6 @@ fn diagnose_split(
         // hundred samples is too small a share of a record for the growth to see (the full
         // thesis stage with +30 and +60 mV: the offset went by the level rule before).
         let mut unshown: Option<(f64, f64)> = None;
-
         let weakest = trials
             .into_iter()
             .flatten()
@@ -1906,7 +1904,6 @@ fn diagnose_split(
                     1e3 * fitted_v,
                     1e3 * level_v
                 ),
-
                 _ => format!(
                     "removed in the final check{with}: without it the residual above the noise floor grows only {ratio:.2}x (< {bar_e:.2}x)"
                 ),
