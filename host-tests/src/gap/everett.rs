@@ -536,7 +536,7 @@ pub fn start_memory(range: (f64, f64), form: CentreLine, start_v: &[f64]) -> Vec
 }
 
 /// Node `i` of the grid over `range`, volts.
-fn node_v(range: (f64, f64), i: usize) -> f64 {
+pub(super) fn node_v(range: (f64, f64), i: usize) -> f64 {
     range.0 + (range.1 - range.0) * i as f64 / INTERVALS as f64
 }
 
@@ -657,7 +657,7 @@ fn t_edge(a: f64, b: f64, top: bool, k: usize, range: (f64, f64), form: CentreLi
 }
 
 /// The grid of `f(a, b)` at the nodes, packed.
-fn grid(range: (f64, f64), f: impl Fn(f64, f64) -> f64) -> Vec<f32> {
+pub(super) fn grid(range: (f64, f64), f: impl Fn(f64, f64) -> f64) -> Vec<f32> {
     let mut e = vec![0.0f32; TABLE_LEN];
     for i in 1..GRID_NODES {
         for j in 0..i {

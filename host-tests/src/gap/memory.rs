@@ -37,8 +37,9 @@
 //! the gate either.
 
 use super::data::{Data, simulate_all};
+use super::everett;
 use crate::io::model_file::{HysteresisSection, ModelFile};
-use model_core::hysteresis::{GRID_NODES, TABLE_LEN, packed_index};
+use model_core::hysteresis::GRID_NODES;
 use nalgebra::{DMatrix, DVector};
 
 /// Weight of the second-difference penalty on the twin's map, as a share of the mean
@@ -109,7 +110,7 @@ fn twin_map(
     let mut out = Vec::with_capacity(n);
     let mut last = f64::NEG_INFINITY;
     for j in 0..n {
-        let v = (table_gain * (lo + j as f64 * step) + f[j]).max(last);
+        let v = (table_gain * everett::node_v(range, j) + f[j]).max(last);
         out.push(v);
         last = v;
     }
@@ -119,14 +120,10 @@ fn twin_map(
 /// The hysteresis section of a memoryless table over `range` whose output is `map` (sensor
 /// volts at the grid nodes): `E(a, b) = F(a) - F(b)`, the output at the bottom `F(lo)`.
 fn memoryless_section(range: (f64, f64), map: &[f64]) -> HysteresisSection {
-    let mut e = vec![0.0f32; TABLE_LEN];
-    for i in 1..GRID_NODES {
-        for j in 0..i {
-            if let Some(k) = packed_index(i, j) {
-                e[k] = ((map[i] - map[j]).max(0.0)) as f32;
-            }
-        }
-    }
+    // (the grid's nodes are `everett::node_v`'s: the map at a node voltage is its own value)
+    let step = (range.1 - range.0) / (GRID_NODES - 1) as f64;
+    let at = |v: f64| map[(((v - range.0) / step).round() as usize).min(GRID_NODES - 1)];
+    let e = everett::grid(range, |a, b| (at(a) - at(b)).max(0.0));
     HysteresisSection {
         input_range_v: [range.0, range.1],
         offset_v: map[0],
