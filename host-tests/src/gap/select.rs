@@ -1578,8 +1578,8 @@ fn diagnose_split(
                 // was true: families case 1006).
                 // (and one that explains less than the shape: the shapes gone, it was named in
                 // their place, by its lags' constant and scale; families cases 1540 and 2000, a
-                // loop and a curvature on one long sine, drift leaving 1.6x the curvature's
-                // share)
+                // loop beside a scale or a curvature on one long sine, the drift leaving 1.5-1.6x
+                // what the step's shape left)
                 if !any_hold
                     && let Some(d) = scored.iter().find(|x| {
                         x.3 && !x.0.refit
@@ -2037,7 +2037,8 @@ fn diagnose_split(
     // records tell from the loop's own centre line and constant, all of them together (the
     // loop's misfit is shared between them: one at a time, a true curvature beside a false
     // scale is not told, the scale's refit taking its place): held levels they put clearly
-    // nearer, or a rest at 0 V that shows the offset among them. Untold, they go whatever
+    // nearer from both sides (`told_beside_loop`), or a rest at 0 V that shows the offset
+    // among them. Untold, they go whatever
     // their growth, after the final check (before it, a drift or a table the final check
     // would have found redundant beside them stayed in their place).
     // (an offset on records that read no sensor zero is step 13's: it moves into the table's
@@ -3026,7 +3027,9 @@ pub(super) fn held_levels(data: &[Data]) -> usize {
 /// from below and those reached from above ([`reached_from_below`]) must each reach two
 /// distinct levels, and the model with the shapes (`with`) must put each side's levels
 /// [`STATIC_TELL_RATIO`] times nearer ([`held_level_error_from`]) than the model without them
-/// (`without`, the others refitted). A static shape moves a level alike from either side; a
+/// (`without`, the others refitted), and all the holds [`HELD_LEVELS_MIN`] levels (a record's
+/// first hold, reached from no other input, counts on neither side). A static shape moves a
+/// level alike from either side; a
 /// loop of another form than the table's misses its branches, and a shape that takes up one
 /// branch's miss need not bring the other's levels nearer (session 47: with all holds pooled,
 /// families random-levels cases 1602, 1637, 2045 and 2295 named a false scale or curvature
@@ -3036,15 +3039,18 @@ pub(super) fn held_levels(data: &[Data]) -> usize {
 /// named beside a loop were right 19 times and false 26. An offset's rest at 0 V is the other
 /// test (the final check asks it beside this one).
 fn told_beside_loop(data: &[Data], with: &[Vec<f64>], without: &[Vec<f64>], var: &[f64]) -> bool {
-    [true, false].into_iter().all(|from_below| {
-        match (
-            held_level_error_from(data, with, var, Some(from_below)),
-            held_level_error_from(data, without, var, Some(from_below)),
-        ) {
-            (Some(a), Some(b)) => a * STATIC_TELL_RATIO <= b,
-            _ => false,
-        }
-    })
+    // (three levels in all, as the pooled test asked: a scale, an offset and a curvature are
+    // three parameters)
+    held_levels(data) >= HELD_LEVELS_MIN
+        && [true, false].into_iter().all(|from_below| {
+            match (
+                held_level_error_from(data, with, var, Some(from_below)),
+                held_level_error_from(data, without, var, Some(from_below)),
+            ) {
+                (Some(a), Some(b)) => a * STATIC_TELL_RATIO <= b,
+                _ => false,
+            }
+        })
 }
 
 /// How far a simulation leaves the records' held levels: over every hold of the records
@@ -4014,6 +4020,15 @@ mod tests {
             held_level_error(data, &[branch], &var).unwrap(),
         );
         assert!(a * STATIC_TELL_RATIO <= b, "{a} {b}");
+        // Levels reached from below only tell nothing, however much nearer the shapes put them.
+        let rising = held(&[0.0, 2.0, 5.0, 8.0]);
+        let off: Vec<f64> = rising.y_v.iter().map(|y| y + 2e-3).collect();
+        assert!(!told_beside_loop(
+            std::slice::from_ref(&rising),
+            std::slice::from_ref(&rising.y_v),
+            &[off],
+            &var
+        ));
     }
 
     /// The held levels' error is the squared level misfit in noise variances, summed over the
