@@ -315,8 +315,8 @@ pub enum TakenOut {
     BelowBar,
     /// It took `alternative` (a static shape beside a table) out as one the records do not
     /// tell from the loop's own centre line and constant (GAP.md step 17): no held levels it
-    /// puts clearly nearer from both sides, no rest at 0 V that shows an offset. `alternative_rms_v` is what
-    /// the model left with it, `rms_v` without it.
+    /// puts clearly nearer from both sides, no rest at 0 V that shows an offset.
+    /// `alternative_rms_v` is what the model left with it, `rms_v` without it.
     Untold,
 }
 
@@ -2051,12 +2051,9 @@ fn diagnose_split(
         .filter(|n| !(zero_unread && n.as_str() == "offset"))
         .cloned()
         .collect();
-    // (not beside the span split's table: its elements leave out their own centre line over
-    // the records' span, so the loop it fits has a straight one, as the thesis' table has,
-    // and a shape beside it is the records' centre line's, the catalogue's own division; the
-    // thesis stage on one sine names its K'(u) there, `tests/gap.rs`)
-    let straight_centre = slow_x.form() == CentreLine::Span;
-    if named.iter().any(|n| n == "hysteresis") && !statics.is_empty() && !straight_centre {
+    // (not beside the span split's table, `shapes_told_beside_loop`: the thesis stage on one
+    // sine names its K'(u) there, `tests/gap.rs`)
+    if shapes_told_beside_loop(&named, slow_x.form()) && !statics.is_empty() {
         let mut m = model.clone();
         for e in &statics {
             m = catalogue::revert(&m, base, e);
@@ -2298,8 +2295,7 @@ fn diagnose_split(
         };
         // (step 17: beside a table, a static shape swapped in must be one the records tell
         // from the loop, as the final check asks)
-        let beside_loop =
-            named.iter().any(|n| n == "hysteresis") && slow_x.form() != CentreLine::Span;
+        let beside_loop = shapes_told_beside_loop(&named, slow_x.form());
         // Per trial: the effect swapped in passes the gate, and it is an alike shape with
         // fewer parameters.
         let flags: Vec<(bool, bool)> = swaps
@@ -3010,16 +3006,41 @@ pub const HELD_LEVEL_MIN_SEP_V: f64 = 0.1;
 /// The distinct input levels the records hold ([`Data::holds`], each read at the hold's
 /// middle; levels closer than [`HELD_LEVEL_MIN_SEP_V`] counted once).
 pub(super) fn held_levels(data: &[Data]) -> usize {
+    held_levels_on(data, None)
+}
+
+/// A hold's input level: the input at its middle sample.
+fn hold_level_v(d: &Data, h: &std::ops::Range<usize>) -> f64 {
+    d.u_v[h.start + (h.end - h.start) / 2]
+}
+
+/// Is hold `h` of `d` on `side`: reached from below (`Some(true)`, [`reached_from_below`]),
+/// from above (`Some(false)`), or any (`None`)?
+fn on_side(d: &Data, h: &std::ops::Range<usize>, side: Option<bool>) -> bool {
+    side.is_none_or(|up| reached_from_below(d, h) == Some(up))
+}
+
+/// [`held_levels`] over the holds on `side` ([`on_side`]).
+fn held_levels_on(data: &[Data], side: Option<bool>) -> usize {
     let mut levels: Vec<f64> = Vec::new();
     for d in data {
-        for h in d.holds() {
-            let u = d.u_v[h.start + (h.end - h.start) / 2];
+        for h in d.holds().iter().filter(|h| on_side(d, h, side)) {
+            let u = hold_level_v(d, h);
             if levels.iter().all(|l| (l - u).abs() > HELD_LEVEL_MIN_SEP_V) {
                 levels.push(u);
             }
         }
     }
     levels.len()
+}
+
+/// Must the static shapes beside the named set's table be told from its loop (GAP.md step 17;
+/// the final check's and the swaps' test, [`told_beside_loop`])? Where `hysteresis` is named,
+/// unless the table is the span split's ([`CentreLine::Span`]: its elements leave out their
+/// own centre line over the records' span, so its loop's centre line is straight, as the
+/// thesis' table's is, and a shape beside it is the records' centre line's).
+fn shapes_told_beside_loop(named: &[String], form: CentreLine) -> bool {
+    named.iter().any(|n| n == "hysteresis") && form != CentreLine::Span
 }
 
 /// Do the records tell the static shapes beside a table from the loop's own centre line and
@@ -3076,7 +3097,7 @@ fn held_level_error(data: &[Data], sims: &[Vec<f64>], var: &[f64]) -> Option<f64
 /// Was hold `h` of `d` reached from below (the last input before it that lies more than
 /// [`HELD_LEVEL_MIN_SEP_V`] from its level is lower)? `None` where no such input comes first.
 fn reached_from_below(d: &Data, h: &std::ops::Range<usize>) -> Option<bool> {
-    let level = d.u_v[h.start + (h.end - h.start) / 2];
+    let level = hold_level_v(d, h);
     d.u_v[..h.start]
         .iter()
         .rev()
@@ -3093,24 +3114,12 @@ fn held_level_error_from(
     var: &[f64],
     side: Option<bool>,
 ) -> Option<f64> {
-    let on_side = |d: &Data, h: &std::ops::Range<usize>| {
-        side.is_none_or(|up| reached_from_below(d, h) == Some(up))
-    };
-    let mut levels: Vec<f64> = Vec::new();
-    for d in data {
-        for h in d.holds().iter().filter(|h| on_side(d, h)) {
-            let u = d.u_v[h.start + (h.end - h.start) / 2];
-            if levels.iter().all(|l| (l - u).abs() > HELD_LEVEL_MIN_SEP_V) {
-                levels.push(u);
-            }
-        }
-    }
-    if levels.len() < if side.is_some() { 2 } else { HELD_LEVELS_MIN } {
+    if held_levels_on(data, side) < if side.is_some() { 2 } else { HELD_LEVELS_MIN } {
         return None;
     }
     let mut err = 0.0;
     for ((d, s), &v) in data.iter().zip(sims).zip(var) {
-        for h in d.holds().iter().filter(|h| on_side(d, h)) {
+        for h in d.holds().iter().filter(|h| on_side(d, h, side)) {
             let from = h.start + (h.end - h.start) / 2;
             let n = (h.end - from) as f64;
             let mean = (from..h.end).map(|i| d.y_v[i] - s[i]).sum::<f64>() / n;
