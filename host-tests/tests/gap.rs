@@ -975,9 +975,10 @@ fn draw_preisach_pi(rng: &mut rand::rngs::StdRng) -> (Vec<f64>, Vec<f64>, f64) {
 /// (0.5..9.5 V), a Prandtl-Ishlinskii hysteresis with random radii (a Preisach-class truth of
 /// another shape than the catalogue's radii), a loop of 10-15 % of the input span, started
 /// with every operator centred on the first input (not on the major curve), and a sensor
-/// offset, 1 mV noise. Returns per seed the names given and the final residual over the
-/// floor.
-fn single_sine_outcomes(seeds: &[u64]) -> Vec<(u64, Vec<String>, f64)> {
+/// offset, 1 mV noise. Returns per seed the names given, the final residual over the floor,
+/// and the diagnosed and the true sensor offsets (volts; the diagnosed one 0 where the model
+/// has none).
+fn single_sine_outcomes(seeds: &[u64]) -> Vec<SineOutcome> {
     let (t, u) = raised_cosine(5_000.0, 10.0, 1.0, 5.0, 4.5);
     let mut results = Vec::new();
     for &seed in seeds {
@@ -1034,17 +1035,42 @@ fn single_sine_outcomes(seeds: &[u64]) -> Vec<(u64, Vec<String>, f64)> {
                 println!("seed {seed}: cannot tell {c:?}");
             }
         }
-        results.push((seed, d.named.clone(), d.final_rms_v / d.noise_floor_v));
+        results.push(SineOutcome {
+            seed,
+            named: d.named.clone(),
+            ratio: d.final_rms_v / d.noise_floor_v,
+            offset_v: d.model.offset.as_ref().map_or(0.0, |o| o.offset_v),
+            truth_offset_v: offset_v,
+        });
     }
-    for (seed, named, ratio) in &results {
-        println!("seed {seed}: named {named:?}, final {ratio:.2}x the floor");
+    for o in &results {
+        println!(
+            "seed {}: named {:?}, final {:.2}x the floor, offset {:.1} mV (truth {:.1} mV)",
+            o.seed,
+            o.named,
+            o.ratio,
+            1e3 * o.offset_v,
+            1e3 * o.truth_offset_v
+        );
     }
     results
 }
 
-/// What the workflow achieves on the single-sine records today: hysteresis named and no
-/// effect the truth lacks (the offset may be named), within a bound per seed. Measured since
-/// session 30 (eleven bands along the centre axis for the band and rise splits, was four:
+/// One single-sine record's outcome ([`single_sine_outcomes`]).
+struct SineOutcome {
+    seed: u64,
+    named: Vec<String>,
+    ratio: f64,
+    offset_v: f64,
+    truth_offset_v: f64,
+}
+
+/// What the workflow achieves on the single-sine records today: hysteresis and offset named,
+/// the offset of the truth's sign and within half its size, within a bound per seed on the
+/// residual. Session 48 (step 13a: the table's level at the demagnetised start the start search
+/// finds is read as the sensor's offset): seed 21 hysteresis and a 19.3 mV offset (truth 25.5)
+/// at 1.93x, seed 22 and 20.0 mV (truth 21.3) at 1.30x, the same residuals as before (the
+/// move reads the same). Measured since session 30 (eleven bands along the centre axis for the band and rise splits, was four:
 /// `everett::HYST_BANDS_BAND`): seed 21 hysteresis alone at 1.93x, seed 22 at 1.30x; the
 /// offsets still not named (the scale, the curvature and the drift explain alike beside the
 /// table: reported as pairs). The bounds fail on four bands (4.88x on seed 21). Session 25 (a drift that explains alike to the static shapes goes with them when no record
@@ -1071,26 +1097,37 @@ fn single_sine_record_names_hysteresis_and_its_start() {
     // of about a seventh (1.93x and 1.30x in session 30))
     let bounds = [(21, 2.2), (22, 1.5)];
     let outcomes = single_sine_outcomes(&bounds.map(|b| b.0));
-    for ((seed, named, ratio), (_, bound)) in outcomes.into_iter().zip(bounds) {
+    for (o, (_, bound)) in outcomes.into_iter().zip(bounds) {
+        let seed = o.seed;
+        let mut named = o.named.clone();
+        named.sort();
+        assert_eq!(named, ["hysteresis", "offset"], "seed {seed}");
+        // The offset read from the table's level at the demagnetised start (step 13a): the
+        // truth's sign and size within half of it (measured in session 48: 19.3 mV for 25.5,
+        // 20.0 mV for 21.3; over the eight seeds of the ignored requirement 7.0-29.4 mV for
+        // 13.5-29.6, one of them 48 % off). The table's fit at the record's head sets it.
         assert!(
-            named.iter().any(|n| n == "hysteresis"),
-            "seed {seed}: {named:?}"
+            (o.offset_v - o.truth_offset_v).abs() <= 0.5 * o.truth_offset_v.abs(),
+            "seed {seed}: offset {:.1} mV for the truth's {:.1} mV",
+            1e3 * o.offset_v,
+            1e3 * o.truth_offset_v
         );
         assert!(
-            named
-                .iter()
-                .all(|n| ["hysteresis", "offset"].contains(&n.as_str())),
-            "seed {seed}: false name in {named:?}"
-        );
-        assert!(
-            ratio <= bound,
-            "seed {seed}: final {ratio:.2}x the floor (bound {bound}x)"
+            o.ratio <= bound,
+            "seed {seed}: final {:.2}x the floor (bound {bound}x)",
+            o.ratio
         );
     }
 }
 
 /// Issue #12's requirement on the single-sine record: hysteresis and offset named, the
-/// residual within 2x its floor, on eight seeds. Not met yet. Session 30 (eleven bands):
+/// residual within 2x its floor, on eight seeds. Not met yet. Session 48 (step 13a): met on
+/// six of eight (21, 22, 24, 25, 27, 28: hysteresis and offset, 1.30-1.99x, offsets 7.0-29.4
+/// mV of the truths' sign for 13.5-29.6 mV); 23 and 26 end at 2.29x and 2.43x with hysteresis
+/// alone (the model leaves an `unexplained` part there, so step 13a does not read the table's
+/// level: without that condition it names their offsets too, 16.6 and 20.5 mV for 23.9 and
+/// 29.6). What is left is the basis' resolution: operators narrower than half a grid interval
+/// (0.11 V; six of seed 23's ten). Session 30 (eleven bands):
 /// hysteresis alone on all eight, no false name, final 1.30-2.43x the floor, under 2x on six
 /// (21, 22, 24, 25, 27, 28); the offset named on none (the look-alikes as before). Session 25: hysteresis alone on
 /// all eight, no false name, final 1.34-5.76x the floor (median 4.8x), under 2x on 22 only;
@@ -1118,12 +1155,12 @@ fn single_sine_record_names_hysteresis_and_offset() {
     let outcomes = single_sine_outcomes(&seeds);
     let failed: Vec<String> = outcomes
         .iter()
-        .filter(|(_, named, ratio)| {
-            let mut named = named.clone();
+        .filter(|o| {
+            let mut named = o.named.clone();
             named.sort();
-            named != ["hysteresis", "offset"] || *ratio > 2.0
+            named != ["hysteresis", "offset"] || o.ratio > 2.0
         })
-        .map(|(seed, named, ratio)| format!("seed {seed}: {named:?} at {ratio:.2}x"))
+        .map(|o| format!("seed {}: {:?} at {:.2}x", o.seed, o.named, o.ratio))
         .collect();
     assert!(
         failed.is_empty(),

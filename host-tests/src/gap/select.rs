@@ -37,6 +37,7 @@ use super::unexplained::{Unexplained, locate};
 use crate::io::model_file::ModelFile;
 use crate::util::{par_map, par_map_costliest_first};
 use anyhow::{Context, bail, ensure};
+use model_core::hysteresis::{HysteresisMemory, HysteresisTable};
 
 /// One step of the workflow: the effect added or refitted.
 #[derive(Clone, Debug, serde::Serialize)]
@@ -542,6 +543,107 @@ fn offset_into_table(model: &ModelFile) -> Option<(ModelFile, f64)> {
     moved.hysteresis.as_mut()?.offset_v += shift_v;
     moved.offset = None;
     Some((moved, shift_v))
+}
+
+/// Noise floors a sensor offset read from the table's level at the records' start must reach
+/// to be named (step 13a; our assumption: the table's fit near a record's head is good to a
+/// floor or two, measured on issue #12's single sines at 0.1-1.8 mV over the first 50 ms).
+pub const START_LEVEL_FLOORS: f64 = 5.0;
+
+/// Is the start memory `turns_v` (turning points after coming up from the bottom) a scan that
+/// died away at the first input `u0_v`: at least four turning points on alternate sides of it
+/// (a point repeated at the same level, as the table's floor clips a scan's lower turns, is
+/// one; a point the input passes on its way on is none), each side's distances from it shrinking (or held, where clipped), the last within
+/// [`CENTRED_LAST_SHARE`] of `span_v`?
+fn centred_scan(turns_v: &[f64], u0_v: f64, span_v: f64) -> bool {
+    let mut pts: Vec<f64> = Vec::new();
+    for &p in turns_v {
+        // (a point the input passes on its way on is no turn: after the floor, a scan's
+        // first turn below the first input is a rise through it to the next)
+        if pts.last().is_some_and(|&q| (q - p).abs() <= 1e-9) {
+            continue;
+        }
+        if let [.., a, b] = pts[..]
+            && (b - a) * (p - b) > 0.0
+        {
+            pts.pop();
+        }
+        pts.push(p);
+    }
+    let Some(&last) = pts.last() else {
+        return false;
+    };
+    let alternate = pts
+        .windows(2)
+        .all(|w| (w[0] - u0_v).signum() * (w[1] - u0_v).signum() < 0.0);
+    let shrinking = |above: bool| {
+        let d: Vec<f64> = pts
+            .iter()
+            .filter(|&&p| (p > u0_v) == above)
+            .map(|&p| (p - u0_v).abs())
+            .collect();
+        d.windows(2).all(|w| w[1] <= w[0] + 1e-9)
+    };
+    pts.len() >= 4
+        && alternate
+        && shrinking(true)
+        && shrinking(false)
+        && (last - u0_v).abs() <= CENTRED_LAST_SHARE * span_v
+}
+
+/// Share of the table's span within which a centred scan's last turning point lies from the
+/// first input (our assumption: [`super::everett::start_candidates`]' scans end at 1 % of the span,
+/// and the start search scales their excursions by up to [`super::start::START_SCALE`]).
+const CENTRED_LAST_SHARE: f64 = 0.05;
+
+/// How closely the table's levels at the first samples of several records must agree for
+/// step 13a to read them as one sensor offset, volts of the table's output (our assumption: a
+/// millivolt, about a noise floor of the records here).
+const START_LEVELS_AGREE_V: f64 = 1e-3;
+
+/// `model` with the level its table holds over its reversible map (`table_gain u`) at the
+/// records' first sample moved into the sensor's `[offset]`, and that offset (volts), where the
+/// start memory is a centred scan ([`centred_scan`]) at every record's first input and the
+/// levels agree across records within [`START_LEVELS_AGREE_V`]. The reading moves per volt of the table's
+/// level as [`offset_into_table`] measures it.
+fn start_level_into_offset(
+    model: &ModelFile,
+    data: &[Data],
+    table_gain: f64,
+) -> Option<(ModelFile, f64)> {
+    let h = model.hysteresis.as_ref()?;
+    let [lo, hi] = h.input_range_v;
+    let grid = h.everett_v.as_ref()?;
+    let table = HysteresisTable::from_grid(lo as f32, hi as f32, h.offset_v as f32, grid).ok()?;
+    let turns = h.start_turns_v.clone().unwrap_or_default();
+    let turns_f32: Vec<f32> = turns.iter().map(|&v| v as f32).collect();
+    let mut levels = Vec::new();
+    for d in data {
+        let &u0 = d.u_v.first()?;
+        if !centred_scan(&turns, u0.clamp(lo, hi), hi - lo) {
+            return None;
+        }
+        let mut mem = HysteresisMemory::new();
+        mem.reset_after(&table, &turns_f32, u0 as f32);
+        levels.push(table.forward(&mut mem, u0 as f32) as f64 - table_gain * u0);
+    }
+    let (min, max) = min_max(&levels);
+    if levels.iter().any(|l| !l.is_finite()) || max - min > START_LEVELS_AGREE_V {
+        return None;
+    }
+    let level_v = levels.iter().sum::<f64>() / levels.len() as f64;
+    let mut up = model.clone();
+    up.hysteresis.as_mut()?.offset_v += 1.0;
+    let u = 0.5 * (lo + hi);
+    let per_v = up.static_reading_v(u).ok()? - model.static_reading_v(u).ok()?;
+    if !per_v.is_finite() || per_v.abs() < 1e-6 {
+        return None;
+    }
+    let mut moved = model.clone();
+    moved.hysteresis.as_mut()?.offset_v -= level_v;
+    let offset_v = moved.offset.as_ref().map_or(0.0, |o| o.offset_v) + level_v * per_v;
+    moved.offset = Some(crate::io::model_file::OffsetSection { offset_v });
+    Some((moved, offset_v))
 }
 
 /// Do two simulations read the same: every record's samples within
@@ -2798,6 +2900,52 @@ fn diagnose_split(
             &sims,
         );
     }
+    // Step 13a: on records that read no sensor zero, the table's level and a sensor offset
+    // are one constant to the records; where the fitted start memory is a scan that died away
+    // at the records' first input (a stage at rest, demagnetised there), the table sits on its
+    // reversible map at that first sample, and the level it holds beyond it is the sensor's
+    // offset (GAP.md, step 13a): moved out of the table (the same readings) and named where it
+    // is START_LEVEL_FLOORS noise floors or more and the model explains every record (no
+    // `unexplained` part: a table that misses a record's loop or scale reads its level wrong).
+    let table_low_v = slow_x.range().0;
+    let mut start_level_named = false;
+    if named.iter().any(|n| n == "hysteresis")
+        && slow_x.form() != CentreLine::Span
+        && reads_no_zero(data, table_low_v)
+        && (named.iter().any(|n| n == "offset") || !catalogue::present(&model, "offset"))
+        && locate(data, &sims, &noise, &cycle_bar).0.is_none()
+        && let Some((moved, offset_v)) = start_level_into_offset(&model, data, slow_x.table_gain())
+        && offset_v.abs() >= START_LEVEL_FLOORS * noise_floor_v
+        && let Ok((moved_sims, moved_mse)) = simulate_all(&moved, data)
+        && same_readings(&moved_sims, &sims, &noise, adc_code_v(&model))
+    {
+        let before_v = model.offset.as_ref().map_or(0.0, |o| o.offset_v);
+        let why = format!(
+            "the fitted start memory is a scan that died away at the records' first input (a \
+             stage at rest there sits on its reversible map), and the table held {:.1} mV over \
+             that map at the first sample: a level its relays these records never switch hold \
+             as well as a sensor offset, read as the sensor's ([offset] {:.1} mV -> {:.1} mV, \
+             the same readings); {ZERO_READING_TELLS}",
+            1e3 * (offset_v - before_v),
+            1e3 * before_v,
+            1e3 * offset_v
+        );
+        if !named.iter().any(|n| n == "offset") {
+            steps.push(Step::new(
+                "offset".into(),
+                why,
+                &cur_mse,
+                &moved_mse,
+                moved_sims.clone(),
+            ));
+            named.push("offset".into());
+        }
+        cannot_tell.retain(|k| k.alternative != "offset" && k.named != "offset");
+        model = moved;
+        sims = moved_sims;
+        cur_mse = moved_mse;
+        start_level_named = true;
+    }
     // Step 13: an offset named beside a table on records that read no sensor zero is a
     // constant the table holds as well (its relays the records never switch, its start
     // memory): the records cannot tell the two, and which one the fit used depends on the
@@ -2806,8 +2954,8 @@ fn diagnose_split(
     // constant moves into the table's own output level (`[hysteresis] offset_v`, the same
     // readings), the offset is no longer named, and the pair is reported as one the records
     // cannot tell, as the standing note below says where no offset was fitted.
-    let table_low_v = slow_x.range().0;
-    if named.iter().any(|n| n == "hysteresis")
+    if !start_level_named
+        && named.iter().any(|n| n == "hysteresis")
         && named.iter().any(|n| n == "offset")
         && reads_no_zero(data, table_low_v)
         && let Some((moved, table_shift_v)) = offset_into_table(&model)
@@ -3980,6 +4128,43 @@ mod tests {
     /// Step 17's tell asks both sides: a level error common to every hold (a static map's) is
     /// told, one on the holds reached from below only (a loop branch's miss) is not, though
     /// the pooled holds put the model without it 1.5x farther.
+    /// Step 13a reads the table's level only after a start that died away at the first input:
+    /// of the start search's candidates on a 10 V table at 5 V, exactly the centred scans (two
+    /// signs of each of `START_DECAYS`) are recognised, under the rise split's memory as
+    /// well; a scan clipped by the table's floor still is; a memory that came down from above,
+    /// a scan around another level, one whose excursions grow and one that ends far from the
+    /// first input are not.
+    #[test]
+    fn only_a_scan_that_died_away_at_the_first_input_is_a_centred_start() {
+        let range = (0.0, 10.0);
+        let span = range.1 - range.0;
+        for form in [CentreLine::Band, CentreLine::Rise] {
+            let centred = super::super::everett::start_candidates(5.0, range)
+                .iter()
+                .filter(|c| {
+                    let mem = super::super::everett::start_memory(range, form, c);
+                    centred_scan(&mem, 5.0, span)
+                })
+                .count();
+            assert_eq!(
+                centred,
+                2 * super::super::everett::START_DECAYS.len(),
+                "{form:?}"
+            );
+        }
+        let floor = 10.0 / 44.0;
+        let clipped = [
+            10.0, floor, 4.2, floor, 3.2, floor, 1.9, 0.3, 0.8, 0.4, 0.62,
+        ];
+        assert!(centred_scan(&clipped, 0.5, span));
+        assert!(centred_scan(&[7.0, 3.5, 6.0, 4.3, 5.4], 5.0, span));
+        assert!(!centred_scan(&[8.0], 5.0, span));
+        assert!(!centred_scan(&[10.0, floor], 0.5, span));
+        assert!(!centred_scan(&[4.0, 1.5, 3.2, 2.1], 5.0, span));
+        assert!(!centred_scan(&[6.0, 4.0, 7.0, 3.0, 5.2], 5.0, span));
+        assert!(!centred_scan(&[9.0, 1.0, 8.0, 2.0], 5.0, span));
+    }
+
     #[test]
     fn static_shapes_beside_a_loop_are_told_from_both_sides() {
         let d = held(&[0.0, 2.0, 6.0, 4.0, 8.0, 1.0]);
