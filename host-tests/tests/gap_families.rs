@@ -1454,3 +1454,43 @@ fn without_holds_a_drift_no_better_than_a_shape_is_not_named() {
         );
     }
 }
+
+/// GAP.md step 16a (session 48): where the held levels cannot tell a loop (every step up of a
+/// random-levels record landed above 5 V and every step down below it, so the direction into
+/// a hold follows from its level), the memoryless twin asks the records instead. Families
+/// case 2548, a 6.7 % Bouc-Wen loop and an offset on random levels: the gate refused the
+/// table (explaining 99.6 % of the base residual above the floor) and `nonlinear-gain` was
+/// named alone at 144x the floor; the best map of the input alone leaves 12 % of it, 29 times
+/// what the table leaves, so the loop is named now and no static shape the truth lacks is.
+/// Cases 1019 and 1024 (static shapes only, on the same protocol) keep their loop out: their
+/// twins explain all of it.
+#[test]
+fn untold_held_levels_leave_the_loop_to_the_memoryless_twin() {
+    let base = ModelFile::built_in("thesis-linear").unwrap();
+    let d = diagnose(&base, &Case::draw(2548).records(), &Options::default()).expect("diagnosis");
+    assert!(d.named.iter().any(|n| n == "hysteresis"), "{}", d.table());
+    assert!(
+        d.named
+            .iter()
+            .all(|n| ["hysteresis", "offset"].contains(&n.as_str())),
+        "{}",
+        d.table()
+    );
+    let twin = d
+        .tried
+        .first()
+        .and_then(|step| step.iter().find(|t| t.0 == gap::memory::TWIN_NAME))
+        .expect("the twin is tried at the first step");
+    assert!(
+        twin.3 && twin.2 <= 1.0 - gap::select::UNTOLD_TWIN_LEFT_MIN,
+        "{twin:?}"
+    );
+    for seed in [1019, 1024] {
+        let d = diagnose(&base, &Case::draw(seed).records(), &Options::default()).unwrap();
+        assert!(
+            !d.named.iter().any(|n| n == "hysteresis"),
+            "seed {seed}: {}",
+            d.table()
+        );
+    }
+}

@@ -545,6 +545,18 @@ fn offset_into_table(model: &ModelFile) -> Option<(ModelFile, f64)> {
     Some((moved, shift_v))
 }
 
+/// How many times more of the residual power above the floor the memoryless twin of a
+/// table must leave than the table does for step 16a to admit `hysteresis` where the held
+/// levels cannot tell a loop (our assumption: a tenth; a static misfit drawn into a loop
+/// through the stage's dynamics leaves the twin about as much as the table, step 16).
+pub const UNTOLD_TWIN_RATIO: f64 = 10.0;
+
+/// The least share of the residual power above the floor the memoryless twin must leave for
+/// step 16a (our assumption: a map that explains 95 % of it leaves no loop worth a table;
+/// families cases 1019 and 1024, static shapes on random levels, had twins that explained
+/// all of it as well as the table did).
+pub const UNTOLD_TWIN_LEFT_MIN: f64 = 0.05;
+
 /// Noise floors a sensor offset read from the table's level at the records' start must reach
 /// to be named (step 13a; our assumption: the table's fit near a record's head is good to a
 /// floor or two, measured on issue #12's single sines at 0.1-1.8 mV over the first 50 ms).
@@ -1437,6 +1449,46 @@ fn diagnose_split(
                     mse: t_mse,
                 };
                 let (t_score, t_explained, _) = judge(&twin, set);
+                twin_tried = Some((twin.effect, t_score, t_explained, shown));
+                ok = shown;
+            }
+            // Step 16a: where the held levels cannot tell a loop from a static shape (the
+            // direction into each hold follows from its level), no record answered otherwise
+            // and the holds show no creep's tails, the memoryless twin asks the records
+            // instead: a table that leaves UNTOLD_TWIN_RATIO times less above the floor than
+            // the best map of the input alone, where that map leaves UNTOLD_TWIN_LEFT_MIN of it
+            // or more, shows memory the static shapes cannot take
+            // (families case 2548: a Bouc-Wen loop on random levels, every step up above 5 V
+            // and every step down below it, named `nonlinear-gain` at 144x the floor).
+            if !sig_ok
+                && score < 0.0
+                && explained >= MIN_EXPLAINED
+                && harmless
+                && c.effect == "hysteresis"
+                && !c.refit
+                && sigs.held_loop_untold
+                && !sigs.loop_answered
+                && sigs.tail_v < DRIFT_TAIL_MIN_NOISE * sigs.noise_v
+                && let Some((_, t_mse)) = memory::twin(
+                    &model,
+                    data,
+                    &sims,
+                    slow_x.fit_input(),
+                    slow_x.range(),
+                    slow_x.table_gain(),
+                )
+            {
+                let twin = Candidate {
+                    effect: memory::TWIN_NAME.into(),
+                    refit: false,
+                    model: model.clone(),
+                    k: 0,
+                    sims: Vec::new(),
+                    mse: t_mse,
+                };
+                let (t_score, t_explained, _) = judge(&twin, set);
+                let (t_left, left) = (1.0 - t_explained, 1.0 - explained);
+                let shown = t_left >= UNTOLD_TWIN_LEFT_MIN && t_left >= UNTOLD_TWIN_RATIO * left;
                 twin_tried = Some((twin.effect, t_score, t_explained, shown));
                 ok = shown;
             }
