@@ -37,7 +37,7 @@ use super::unexplained::{Unexplained, locate};
 use crate::io::model_file::ModelFile;
 use crate::util::{par_map, par_map_costliest_first};
 use anyhow::{Context, bail, ensure};
-use model_core::hysteresis::{HysteresisMemory, HysteresisTable};
+use model_core::hysteresis::HysteresisMemory;
 
 /// One step of the workflow: the effect added or refitted.
 #[derive(Clone, Debug, serde::Serialize)]
@@ -521,24 +521,27 @@ fn reads_no_zero(data: &[Data], table_low_v: f64) -> bool {
         .all(|d| d.zero_rest_len().is_none() && min_max(&d.u_v).0 > table_low_v + REST_ZERO_INPUT_V)
 }
 
-/// `model` with its `[offset]` moved into the hysteresis table's own output level, and the
-/// table's shift (volts of the table's output): the reading moves by the sensor's scale
-/// times K'(u) per volt of the table's level (the plant's static gain is 1: the 0.79 lives in
-/// the table), measured on the stage at the table's mid-range input
-/// ([`ModelFile::static_reading_v`], as [`ModelFile::settled_creep_reading_v`] reads the
-/// drift). Exact where no K'(u) scales the
-/// table ([`same_readings`] checks it).
-fn offset_into_table(model: &ModelFile) -> Option<(ModelFile, f64)> {
-    let offset_v = model.offset.as_ref()?.offset_v;
+/// How far `model`'s reading moves per volt of its hysteresis table's own output level
+/// (`[hysteresis] offset_v`): the sensor's scale times K'(u) (the plant's static gain is 1:
+/// the 0.79 lives in the table), measured on the stage at the table's mid-range input
+/// ([`ModelFile::static_reading_v`]). `None` without a table, or where it does not move it.
+fn reading_per_table_v(model: &ModelFile) -> Option<f64> {
     let [lo, hi] = model.hysteresis.as_ref()?.input_range_v;
     let mut up = model.clone();
     up.hysteresis.as_mut()?.offset_v += 1.0;
     let u = 0.5 * (lo + hi);
     let per_v = up.static_reading_v(u).ok()? - model.static_reading_v(u).ok()?;
-    if !per_v.is_finite() || per_v.abs() < 1e-6 {
-        return None;
-    }
-    let shift_v = offset_v / per_v;
+    (per_v.is_finite() && per_v.abs() >= 1e-6).then_some(per_v)
+}
+
+/// `model` with its `[offset]` moved into the hysteresis table's own output level, and the
+/// table's shift (volts of the table's output): the reading moves by the sensor's scale
+/// times K'(u) per volt of the table's level (the plant's static gain is 1: the 0.79 lives in
+/// the table: [`reading_per_table_v`], as [`ModelFile::settled_creep_reading_v`] reads the
+/// drift). Exact where no K'(u) scales the table ([`same_readings`] checks it).
+fn offset_into_table(model: &ModelFile) -> Option<(ModelFile, f64)> {
+    let offset_v = model.offset.as_ref()?.offset_v;
+    let shift_v = offset_v / reading_per_table_v(model)?;
     let mut moved = model.clone();
     moved.hysteresis.as_mut()?.offset_v += shift_v;
     moved.offset = None;
@@ -565,8 +568,8 @@ pub const START_LEVEL_FLOORS: f64 = 5.0;
 /// Is the start memory `turns_v` (turning points after coming up from the bottom) a scan that
 /// died away at the first input `u0_v`: at least four turning points on alternate sides of it
 /// (a point repeated at the same level, as the table's floor clips a scan's lower turns, is
-/// one; a point the input passes on its way on is none), each side's distances from it shrinking (or held, where clipped), the last within
-/// [`CENTRED_LAST_SHARE`] of `span_v`?
+/// one; a point the input passes on its way on is none), each side's distances from it
+/// shrinking (or held, where clipped), the last within [`CENTRED_LAST_SHARE`] of `span_v`?
 fn centred_scan(turns_v: &[f64], u0_v: f64, span_v: f64) -> bool {
     let mut pts: Vec<f64> = Vec::new();
     for &p in turns_v {
@@ -604,8 +607,8 @@ fn centred_scan(turns_v: &[f64], u0_v: f64, span_v: f64) -> bool {
 }
 
 /// Share of the table's span within which a centred scan's last turning point lies from the
-/// first input (our assumption: [`super::everett::start_candidates`]' scans end at 1 % of the span,
-/// and the start search scales their excursions by up to [`super::start::START_SCALE`]).
+/// first input (our assumption: [`super::everett::start_candidates`]' scans end at 1 % of the
+/// span, and the start search scales their excursions by up to [`super::start::START_SCALE`]).
 const CENTRED_LAST_SHARE: f64 = 0.05;
 
 /// How closely the table's levels at the first samples of several records must agree for
@@ -616,8 +619,8 @@ const START_LEVELS_AGREE_V: f64 = 1e-3;
 /// `model` with the level its table holds over its reversible map (`table_gain u`) at the
 /// records' first sample moved into the sensor's `[offset]`, and that offset (volts), where the
 /// start memory is a centred scan ([`centred_scan`]) at every record's first input and the
-/// levels agree across records within [`START_LEVELS_AGREE_V`]. The reading moves per volt of the table's
-/// level as [`offset_into_table`] measures it.
+/// levels agree across records within [`START_LEVELS_AGREE_V`]. The reading moves per volt of
+/// the table's level by [`reading_per_table_v`].
 fn start_level_into_offset(
     model: &ModelFile,
     data: &[Data],
@@ -625,10 +628,9 @@ fn start_level_into_offset(
 ) -> Option<(ModelFile, f64)> {
     let h = model.hysteresis.as_ref()?;
     let [lo, hi] = h.input_range_v;
-    let grid = h.everett_v.as_ref()?;
-    let table = HysteresisTable::from_grid(lo as f32, hi as f32, h.offset_v as f32, grid).ok()?;
+    let table = h.table().ok()?;
     let turns = h.start_turns_v.clone().unwrap_or_default();
-    let turns_f32: Vec<f32> = turns.iter().map(|&v| v as f32).collect();
+    let history = h.start_history_v();
     let mut levels = Vec::new();
     for d in data {
         let &u0 = d.u_v.first()?;
@@ -636,7 +638,7 @@ fn start_level_into_offset(
             return None;
         }
         let mut mem = HysteresisMemory::new();
-        mem.reset_after(&table, &turns_f32, u0 as f32);
+        mem.reset_after(&table, &history, u0 as f32);
         levels.push(table.forward(&mut mem, u0 as f32) as f64 - table_gain * u0);
     }
     let (min, max) = min_max(&levels);
@@ -644,13 +646,7 @@ fn start_level_into_offset(
         return None;
     }
     let level_v = levels.iter().sum::<f64>() / levels.len() as f64;
-    let mut up = model.clone();
-    up.hysteresis.as_mut()?.offset_v += 1.0;
-    let u = 0.5 * (lo + hi);
-    let per_v = up.static_reading_v(u).ok()? - model.static_reading_v(u).ok()?;
-    if !per_v.is_finite() || per_v.abs() < 1e-6 {
-        return None;
-    }
+    let per_v = reading_per_table_v(model)?;
     let mut moved = model.clone();
     moved.hysteresis.as_mut()?.offset_v -= level_v;
     let offset_v = moved.offset.as_ref().map_or(0.0, |o| o.offset_v) + level_v * per_v;
@@ -1422,11 +1418,25 @@ fn diagnose_split(
             };
             let (score, explained, harmless) = judge(&c, set);
             let sig_ok = c.effect.split('+').all(|e| sigs.supports(e, &c.model));
-            let mut ok = score < 0.0 && explained >= MIN_EXPLAINED && sig_ok && harmless;
-            // Step 16: a table is memory; its gate is read again on what a map of the input
-            // alone leaves, where a loop a static misfit drew through the dynamics is gone
-            // (`memory`).
-            if ok
+            let admissible = score < 0.0 && explained >= MIN_EXPLAINED && harmless;
+            let mut ok = admissible && sig_ok;
+            // Steps 16 and 16a: a table is memory, and the memoryless twin (the best map of
+            // the input alone, `memory`) reads its gate. Step 16: where the signatures show a
+            // loop, it is read again on the twin's residual, where a loop a static misfit drew
+            // through the dynamics is gone. Step 16a: where the held levels cannot tell a loop
+            // from a static shape (the direction into each hold follows from its level), no
+            // record answered otherwise and the holds show no creep's tails, the twin asks the
+            // records instead: a table that leaves UNTOLD_TWIN_RATIO times less above the floor
+            // than the twin, where the twin leaves UNTOLD_TWIN_LEFT_MIN of it or more, shows
+            // memory the static shapes cannot take (families case 2548: a Bouc-Wen loop on
+            // random levels, every step up above 5 V and every step down below it, named
+            // `nonlinear-gain` at 144x the floor).
+            let untold = !sig_ok
+                && sigs.held_loop_untold
+                && !sigs.loop_answered
+                && sigs.tail_v < DRIFT_TAIL_MIN_NOISE * sigs.noise_v;
+            if admissible
+                && (sig_ok || untold)
                 && c.effect == "hysteresis"
                 && !c.refit
                 && let Some((t_sims, t_mse)) = memory::twin(
@@ -1438,8 +1448,6 @@ fn diagnose_split(
                     slow_x.table_gain(),
                 )
             {
-                let shown =
-                    signatures::compute(data, &t_sims, &noise).supports("hysteresis", &c.model);
                 let twin = Candidate {
                     effect: memory::TWIN_NAME.into(),
                     refit: false,
@@ -1449,46 +1457,12 @@ fn diagnose_split(
                     mse: t_mse,
                 };
                 let (t_score, t_explained, _) = judge(&twin, set);
-                twin_tried = Some((twin.effect, t_score, t_explained, shown));
-                ok = shown;
-            }
-            // Step 16a: where the held levels cannot tell a loop from a static shape (the
-            // direction into each hold follows from its level), no record answered otherwise
-            // and the holds show no creep's tails, the memoryless twin asks the records
-            // instead: a table that leaves UNTOLD_TWIN_RATIO times less above the floor than
-            // the best map of the input alone, where that map leaves UNTOLD_TWIN_LEFT_MIN of it
-            // or more, shows memory the static shapes cannot take
-            // (families case 2548: a Bouc-Wen loop on random levels, every step up above 5 V
-            // and every step down below it, named `nonlinear-gain` at 144x the floor).
-            if !sig_ok
-                && score < 0.0
-                && explained >= MIN_EXPLAINED
-                && harmless
-                && c.effect == "hysteresis"
-                && !c.refit
-                && sigs.held_loop_untold
-                && !sigs.loop_answered
-                && sigs.tail_v < DRIFT_TAIL_MIN_NOISE * sigs.noise_v
-                && let Some((_, t_mse)) = memory::twin(
-                    &model,
-                    data,
-                    &sims,
-                    slow_x.fit_input(),
-                    slow_x.range(),
-                    slow_x.table_gain(),
-                )
-            {
-                let twin = Candidate {
-                    effect: memory::TWIN_NAME.into(),
-                    refit: false,
-                    model: model.clone(),
-                    k: 0,
-                    sims: Vec::new(),
-                    mse: t_mse,
+                let shown = if sig_ok {
+                    signatures::compute(data, &t_sims, &noise).supports("hysteresis", &c.model)
+                } else {
+                    let (t_left, left) = (1.0 - t_explained, 1.0 - explained);
+                    t_left >= UNTOLD_TWIN_LEFT_MIN && t_left >= UNTOLD_TWIN_RATIO * left
                 };
-                let (t_score, t_explained, _) = judge(&twin, set);
-                let (t_left, left) = (1.0 - t_explained, 1.0 - explained);
-                let shown = t_left >= UNTOLD_TWIN_LEFT_MIN && t_left >= UNTOLD_TWIN_RATIO * left;
                 twin_tried = Some((twin.effect, t_score, t_explained, shown));
                 ok = shown;
             }
@@ -4177,9 +4151,6 @@ mod tests {
         Data::from_record("held.csv", Record::new(t, u, Some(y), None).unwrap()).unwrap()
     }
 
-    /// Step 17's tell asks both sides: a level error common to every hold (a static map's) is
-    /// told, one on the holds reached from below only (a loop branch's miss) is not, though
-    /// the pooled holds put the model without it 1.5x farther.
     /// Step 13a reads the table's level only after a start that died away at the first input:
     /// of the start search's candidates on a 10 V table at 5 V, exactly the centred scans (two
     /// signs of each of `START_DECAYS`) are recognised, under the rise split's memory as
@@ -4217,6 +4188,9 @@ mod tests {
         assert!(!centred_scan(&[9.0, 1.0, 8.0, 2.0], 5.0, span));
     }
 
+    /// Step 17's tell asks both sides: a level error common to every hold (a static map's) is
+    /// told, one on the holds reached from below only (a loop branch's miss) is not, though
+    /// the pooled holds put the model without it 1.5x farther.
     #[test]
     fn static_shapes_beside_a_loop_are_told_from_both_sides() {
         let d = held(&[0.0, 2.0, 6.0, 4.0, 8.0, 1.0]);
