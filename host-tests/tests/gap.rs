@@ -117,7 +117,7 @@ fn truth_model(tr: &Truth) -> ModelFile {
     m.converters.seed = tr.seed;
     if let Some((a, b)) = tr.gain {
         m.nonlinear_gain = Some(GainSection {
-            poly: [1.0, a, b, 0.0],
+            poly: [1.0, a, b, 0.0, 0.0, 0.0, 0.0],
             range_v: [0.0, 10.0],
         });
     }

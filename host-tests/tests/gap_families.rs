@@ -1268,13 +1268,15 @@ fn a_scale_beside_a_curvature_gives_way_to_its_cubic_or_to_an_offset() {
     };
     let d = run(1079);
     assert_eq!(d.named, ["nonlinear-gain"], "{}", d.table());
-    let cubic = d.model.nonlinear_gain.as_ref().unwrap().poly[3];
-    assert!(cubic != 0.0 && d.model.sensor_gain.is_none());
-    assert!(
-        d.steps
-            .iter()
-            .any(|s| s.effect == "sensor-gain" && s.removed && s.params.contains_key("c3_per_v3"))
-    );
+    let higher = d.model.nonlinear_gain.as_ref().unwrap().poly[3..].to_vec();
+    assert!(higher.iter().any(|c| *c != 0.0) && d.model.sensor_gain.is_none());
+    assert!(d.steps.iter().any(|s| {
+        s.effect == "sensor-gain"
+            && s.removed
+            && s.params
+                .keys()
+                .any(|k| k.starts_with('c') && k != "c1_per_v" && k != "c2_per_v2")
+    }));
     assert!(
         d.cannot_tell
             .iter()
@@ -1301,11 +1303,13 @@ fn a_scale_beside_a_curvature_gives_way_to_its_cubic_or_to_an_offset() {
     let d = run(1593);
     assert_eq!(d.named, ["nonlinear-gain"], "{}", d.table());
     assert!(d.model.offset.is_none() && d.model.sensor_gain.is_none());
-    assert!(
-        d.steps
-            .iter()
-            .any(|s| s.effect == "offset" && s.removed && s.params.contains_key("c3_per_v3"))
-    );
+    assert!(d.steps.iter().any(|s| {
+        s.effect == "offset"
+            && s.removed
+            && s.params
+                .keys()
+                .any(|k| k.starts_with('c') && k != "c1_per_v" && k != "c2_per_v2")
+    }));
     assert!(
         d.cannot_tell
             .iter()

@@ -331,22 +331,35 @@ fn thesis_full_toml() -> toml::Value {
     toml::from_str(&text).unwrap()
 }
 
-/// K'(u) takes the thesis' quadratic (three values, the cubic term 0) or a cubic (four); any
-/// other length is refused with what it takes.
+/// K'(u) takes the thesis' quadratic (three values, the higher terms 0) up to terms in `u^6`
+/// (seven); any other length is refused with what it takes. Written back, it keeps four values
+/// where no term above the cubic is set, and the higher terms where one is.
 #[test]
-fn the_gain_polynomial_takes_three_or_four_values() {
+fn the_gain_polynomial_takes_three_to_seven_values() {
     let with_poly = |poly: &[f64]| {
         let mut v = thesis_full_toml();
         v["nonlinear-gain"]["poly"] = toml::Value::try_from(poly.to_vec()).unwrap();
         ModelFile::parse(&toml::to_string(&v).unwrap())
     };
+    let written = |m: &ModelFile| -> usize {
+        let v: toml::Value = toml::from_str(&m.to_toml().unwrap()).unwrap();
+        v["nonlinear-gain"]["poly"].as_array().unwrap().len()
+    };
     let three = with_poly(&[1.0, 0.02, -0.001]).unwrap();
-    assert_eq!(three.nonlinear_gain.unwrap().poly, [1.0, 0.02, -0.001, 0.0]);
+    assert_eq!(written(&three), 4);
+    let poly = three.nonlinear_gain.unwrap().poly;
+    assert_eq!(poly[..3], [1.0, 0.02, -0.001]);
+    assert!(poly[3..].iter().all(|c| *c == 0.0));
     let four = with_poly(&[1.0, 0.02, -0.001, 1e-5]).unwrap();
+    assert_eq!(written(&four), 4);
     assert_eq!(four.nonlinear_gain.unwrap().poly[3], 1e-5);
-    for bad in [&[1.0, 0.02][..], &[1.0, 0.0, 0.0, 0.0, 0.0]] {
+    let six = with_poly(&[1.0, 0.02, -0.001, 0.0, 0.0, 1e-8]).unwrap();
+    assert_eq!(written(&six), 6);
+    let back = ModelFile::parse(&six.to_toml().unwrap()).unwrap();
+    assert_eq!(back.nonlinear_gain.unwrap().poly[5], 1e-8);
+    for bad in [&[1.0, 0.02][..], &[1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0]] {
         let e = with_poly(bad).unwrap_err();
-        assert!(format!("{e:#}").contains("three or four values"), "{e:#}");
+        assert!(format!("{e:#}").contains("three to seven values"), "{e:#}");
     }
 }
 

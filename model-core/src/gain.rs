@@ -8,8 +8,9 @@
 //! ```text
 //! K'(u) = 1 + 0.02 u - 0.001 u^2,   u clamped to 0..10 V
 //! ```
-//! The polynomial has room for a cubic term (zero in the thesis model): a fit may need a
-//! curvature of one more order (host `gap`: a sensor scale against a curvature).
+//! The polynomial has room for terms up to `u^6` ([`POLY_TERMS`]; zero in the thesis model): a
+//! fit may need a curvature of higher order (host `gap`: a sensor scale or an offset against a
+//! curvature, weighed order by order; a plateau such as a `tanh` over 1-9 V needs `u^5`-`u^6`).
 //! 1 at 0 V (so small signals near 0 V see the linear model's 0.79), +2 %/V at first, flat at
 //! 10 V where it reaches 1.10.
 //!
@@ -22,11 +23,17 @@
 use crate::limits::{ConfigError, Reason, check_finite, check_within};
 use crate::params;
 
+/// Coefficients K'(u) holds, lowest power first: up to the `u^6` term (our assumption: a knee
+/// or a plateau over the amplifier's range is fitted to a noise floor of the sensor's by a
+/// polynomial of this order, measured on `tanh`, exponential and softplus maps in the host's
+/// `gap` families; higher orders add nothing there and cost a multiply-add each per sample).
+pub const POLY_TERMS: usize = 7;
+
 /// K'(u) (design time, `f64`).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct FastGainConfig {
-    /// Polynomial coefficients, lowest power first (up to the cubic term).
-    pub poly: [f64; 4],
+    /// Polynomial coefficients, lowest power first (up to the `u^6` term).
+    pub poly: [f64; POLY_TERMS],
     /// Input range over which the polynomial is evaluated, volts; held at the edges outside.
     pub range_v: (f64, f64),
 }
@@ -45,8 +52,7 @@ impl FastGainConfig {
     /// K'(u) in `f64`.
     pub fn gain(&self, u_v: f64) -> f64 {
         let x = u_v.clamp(self.range_v.0, self.range_v.1);
-        let c = self.poly;
-        c[0] + x * (c[1] + x * (c[2] + x * c[3]))
+        self.poly.iter().rev().fold(0.0, |acc, &c| acc * x + c)
     }
 
     /// Finite, K' within 0.2..5 over the range, non-empty range inside -20..20 V, and
@@ -81,7 +87,7 @@ impl FastGainConfig {
 /// K'(u) in `f32` for the per-sample path.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct FastGain {
-    poly: [f32; 4],
+    poly: [f32; POLY_TERMS],
     lo_v: f32,
     hi_v: f32,
 }
@@ -109,8 +115,8 @@ impl FastGain {
     #[inline]
     pub fn gain(&self, u_v: f32) -> f32 {
         let x = u_v.max(self.lo_v).min(self.hi_v);
-        let c = self.poly;
-        c[0] + x * (c[1] + x * (c[2] + x * c[3]))
+        // (Horner over a fixed-length array: no loop bound depends on the data)
+        self.poly.iter().rev().fold(0.0, |acc, &c| acc * x + c)
     }
 }
 
@@ -123,7 +129,7 @@ mod tests {
     #[test]
     fn a_cubic_term_is_evaluated_as_in_f64() {
         let cfg = FastGainConfig {
-            poly: [1.0, 0.03, -0.004, 2e-4],
+            poly: [1.0, 0.03, -0.004, 2e-4, 0.0, 0.0, 0.0],
             range_v: (0.0, 10.0),
         };
         let g = FastGain::new(&cfg).unwrap();
@@ -136,11 +142,35 @@ mod tests {
         }
     }
 
+    /// With every term up to `u^6` (terms of up to 0.4 at 10 V that cancel to 1.03), the `f32`
+    /// K'(u) is the `f64` one within 8 ulp of 1: the rounding of Horner's seven steps on
+    /// partial sums below 1.4.
+    #[test]
+    fn a_sixth_order_gain_is_evaluated_as_in_f64() {
+        let poly = [1.0, 0.03, -0.004, 2e-4, -1e-5, 3e-7, -4e-9];
+        let cfg = FastGainConfig {
+            poly,
+            range_v: (0.0, 10.0),
+        };
+        let g = FastGain::new(&cfg).unwrap();
+        for i in 0..=240 {
+            let u = -1.0 + 12.0 * i as f64 / 240.0;
+            let x = u.clamp(0.0, 10.0);
+            let want: f64 = poly
+                .iter()
+                .enumerate()
+                .map(|(k, c)| c * x.powi(k as i32))
+                .sum();
+            assert!((cfg.gain(u) - want).abs() < 1e-12);
+            assert!((g.gain(u as f32) as f64 - want).abs() < 8.0 * f32::EPSILON as f64);
+        }
+    }
+
     /// A cubic that folds the map (K'(u) u falling somewhere on the range) is refused.
     #[test]
     fn refuses_a_cubic_that_folds_the_map() {
         let c = FastGainConfig {
-            poly: [1.0, 0.0, 0.0, -0.01],
+            poly: [1.0, 0.0, 0.0, -0.01, 0.0, 0.0, 0.0],
             range_v: (0.0, 10.0),
         };
         // (K'(u) u = u - 0.01 u^4 turns down at 2.9 V, where K' is still 0.76)
@@ -153,7 +183,7 @@ mod tests {
     #[test]
     fn refuses_a_gain_that_would_fold_the_map() {
         let c = FastGainConfig {
-            poly: [1.0, -0.5, 0.0, 0.0],
+            poly: [1.0, -0.5, 0.0, 0.0, 0.0, 0.0, 0.0],
             ..FastGainConfig::default()
         };
         assert_eq!(
@@ -161,7 +191,7 @@ mod tests {
             Err(ConfigError::new("gain(u) u", Reason::NotMonotone))
         );
         let c = FastGainConfig {
-            poly: [f64::NAN, 0.0, 0.0, 0.0],
+            poly: [f64::NAN, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0],
             ..FastGainConfig::default()
         };
         assert_eq!(FastGain::new(&c), Err(ConfigError::not_finite("poly")));

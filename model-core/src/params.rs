@@ -220,12 +220,13 @@ pub const DRIFT_POLY_UNNORMALISED: [f64; 4] = [0.1204, 0.1077, -0.0341, 0.0027];
 pub const DRIFT_POLY_U_RANGE_V: (f64, f64) = (0.0, 6.0);
 
 // Non-linear fast gain K'(u), sec. 3.1 / 5.1 (fig. 3.10): no coefficients printed.
-/// K'(u) = c0 + c1 u + c2 u^2 + c3 u^3 (our assumption): 1 at 0 V, growing almost linearly
+/// K'(u) = c0 + c1 u + c2 u^2 (our assumption): 1 at 0 V, growing almost linearly
 /// with the input (+2 %/V near 0 V) and flattening to +10 % at 10 V, where its slope is 0 (the
-/// "plateau" of sec. 5.1); no cubic term. `0.79 K'(u) u` stays strictly increasing on the
-/// range. (The cubic term is there for fits: a curvature of one more order than the thesis'
-/// quadratic, which the model-gap workflow weighs against a sensor scale.)
-pub const FAST_GAIN_POLY: [f64; 4] = [1.0, 0.02, -0.001, 0.0];
+/// "plateau" of sec. 5.1); no higher terms. `0.79 K'(u) u` stays strictly increasing on the
+/// range. (The terms up to `u^6`, [`crate::gain::POLY_TERMS`], are there for fits: curvatures
+/// of higher order than the thesis' quadratic, which the model-gap workflow weighs against a
+/// sensor scale and an offset.)
+pub const FAST_GAIN_POLY: [f64; crate::gain::POLY_TERMS] = [1.0, 0.02, -0.001, 0.0, 0.0, 0.0, 0.0];
 /// Range of inputs over which K'(u) is evaluated; held at the edge values outside (our
 /// assumption: the amplifier's useful 0..10 V at its control input).
 pub const FAST_GAIN_U_RANGE_V: (f64, f64) = (0.0, 10.0);

@@ -201,9 +201,12 @@ pub fn params_of(m: &ModelFile, effect: &str) -> Vec<(String, f64)> {
                 ("c1_per_v".into(), g.poly[1]),
                 ("c2_per_v2".into(), g.poly[2]),
             ];
-            // (the cubic term only where a fit gave one: `select`'s scale-or-curvature check)
-            if g.poly[3] != 0.0 {
-                p.push(("c3_per_v3".into(), g.poly[3]));
+            // (the higher terms only where a fit gave them: `select`'s scale-or-curvature
+            // check, step 14)
+            for (k, &c) in g.poly.iter().enumerate().skip(3) {
+                if c != 0.0 {
+                    p.push((format!("c{k}_per_v{k}"), c));
+                }
             }
             p
         }),
@@ -332,7 +335,7 @@ pub fn with_slow(m: &ModelFile, p: &SlowParams, u_range: (f64, f64)) -> Option<M
     }
     if let Some((c1, c2)) = p.gain {
         m.nonlinear_gain = Some(GainSection {
-            poly: [1.0, c1, c2, 0.0],
+            poly: [1.0, c1, c2, 0.0, 0.0, 0.0, 0.0],
             range_v: [u_range.0, u_range.1],
         });
     }

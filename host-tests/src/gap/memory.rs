@@ -194,7 +194,7 @@ mod tests {
         let base = ModelFile::built_in("thesis-linear").unwrap();
         let mut curved = base.clone();
         curved.nonlinear_gain = Some(crate::io::model_file::GainSection {
-            poly: [1.0, 0.02, -0.002, 0.0],
+            poly: [1.0, 0.02, -0.002, 0.0, 0.0, 0.0, 0.0],
             range_v: [0.0, 10.0],
         });
         let looped = ModelFile::built_in("thesis-full").unwrap();

@@ -77,7 +77,7 @@
 use anyhow::{Context, bail};
 use model_core::amplifier::AmplifierConfig;
 use model_core::drift::DriftConfig;
-use model_core::gain::FastGainConfig;
+use model_core::gain::{FastGainConfig, POLY_TERMS};
 use model_core::hysteresis::HysteresisTable;
 use model_core::params;
 use model_core::sensor::SensorConfig;
@@ -102,19 +102,33 @@ where
 }
 
 /// Three or four values, the missing fourth 0 (K'(u)'s cubic term, which older files lack).
-fn three_or_four<'de, D>(d: D) -> Result<[f64; 4], D::Error>
+fn three_to_seven<'de, D>(d: D) -> Result<[f64; POLY_TERMS], D::Error>
 where
     D: serde::Deserializer<'de>,
 {
     let v: Vec<f64> = Vec::deserialize(d)?;
-    match v[..] {
-        [a, b, c] => Ok([a, b, c, 0.0]),
-        [a, b, c, e] => Ok([a, b, c, e]),
-        _ => Err(serde::de::Error::invalid_length(
+    if !(3..=POLY_TERMS).contains(&v.len()) {
+        return Err(serde::de::Error::invalid_length(
             v.len(),
-            &"three or four values",
-        )),
+            &"three to seven values",
+        ));
     }
+    let mut poly = [0.0; POLY_TERMS];
+    poly[..v.len()].copy_from_slice(&v);
+    Ok(poly)
+}
+
+/// K'(u) written with four values (the cubic term, zero or not, as files had it before the
+/// higher terms), and with the higher terms up to the last that is not zero.
+fn four_or_more<S>(poly: &[f64; POLY_TERMS], s: S) -> Result<S::Ok, S::Error>
+where
+    S: serde::Serializer,
+{
+    let len = poly
+        .iter()
+        .rposition(|c| *c != 0.0)
+        .map_or(4, |i| (i + 1).max(4));
+    poly[..len].serialize(s)
 }
 
 /// `[plant]`.
@@ -209,10 +223,11 @@ pub struct DriftSection {
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct GainSection {
-    /// K'(u), lowest power first: three values (the thesis' quadratic) or four (a cubic
-    /// term, which the model-gap workflow may fit); written with four.
-    #[serde(deserialize_with = "three_or_four")]
-    pub poly: [f64; 4],
+    /// K'(u), lowest power first: three values (the thesis' quadratic) up to seven (terms up
+    /// to `u^6`, which the model-gap workflow may fit, [`POLY_TERMS`]); written with four, or
+    /// up to the last higher term that is not zero.
+    #[serde(deserialize_with = "three_to_seven", serialize_with = "four_or_more")]
+    pub poly: [f64; POLY_TERMS],
     /// Range over which K' is evaluated, V.
     #[serde(deserialize_with = "exact")]
     pub range_v: [f64; 2],

@@ -6,8 +6,11 @@ use model_core::params;
 /// K'(u) in plain powers, held outside 0..10 V.
 pub fn k_fast(u_v: f64) -> f64 {
     let x = u_v.clamp(params::FAST_GAIN_U_RANGE_V.0, params::FAST_GAIN_U_RANGE_V.1);
-    let c = params::FAST_GAIN_POLY;
-    c[3] * x * x * x + c[2] * x * x + c[1] * x + c[0]
+    params::FAST_GAIN_POLY
+        .iter()
+        .enumerate()
+        .map(|(k, c)| c * x.powi(k as i32))
+        .sum()
 }
 
 /// The fast part's static output, sensor volts.
