@@ -1258,7 +1258,7 @@ fn a_stage_parked_after_a_scan_elsewhere_is_fitted_from_there() {
 /// scale's removal said in a step and the pair reported; an exp curvature with a 20 mV offset
 /// on a long sine (seed 1222), once named with a false 1.8 % scale in the offset's place, is
 /// named with the offset swapped in, and both end within 1.5x the floor; step 14 (c) on a
-/// third (seed 1593, below).
+/// third (seed 1593, below), and the orders above the cubic on a fourth (seed 2577, below).
 #[test]
 fn a_scale_beside_a_curvature_gives_way_to_its_cubic_or_to_an_offset() {
     let base = ModelFile::built_in("thesis-linear").unwrap();
@@ -1316,6 +1316,20 @@ fn a_scale_beside_a_curvature_gives_way_to_its_cubic_or_to_an_offset() {
             .any(|c| c.named == "nonlinear-gain" && c.alternative == "offset")
     );
     assert!(d.final_rms_v < 1.5 * d.noise_floor_v);
+    // Above the cubic (session 49): a tanh plateau alone on one sine over 1.4-9.3 V (seed
+    // 2577), once named with a false 1.6 % scale at 4.22x the floor (the cubic without the
+    // scale left 1.7x as much above the floor), is named alone with K'(u) of a higher order,
+    // the pair reported, and ends lower than with the scale.
+    let d = run(2577);
+    assert_eq!(d.named, ["nonlinear-gain"], "{}", d.table());
+    let poly = d.model.nonlinear_gain.as_ref().unwrap().poly;
+    assert!(poly[4..].iter().any(|c| *c != 0.0) && d.model.sensor_gain.is_none());
+    assert!(
+        d.cannot_tell
+            .iter()
+            .any(|c| c.named == "nonlinear-gain" && c.alternative == "sensor-gain")
+    );
+    assert!(d.final_rms_v < 3.0 * d.noise_floor_v, "{}", d.table());
 }
 
 /// GAP.md step 9's pairs: without holds, a drift whose lags stand for an offset beside a scale
