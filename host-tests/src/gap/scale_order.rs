@@ -41,7 +41,7 @@
 //! Gauss-Newton on finite-difference columns of the full simulation, computed once, converges
 //! in a step or two (the amplifier's slew limit and saturation, where named, are the only
 //! non-linear parts on the way, and they act alike on the columns). K'(u)'s directions are
-//! `u P_k(x)`, Legendre polynomials over the gain's range ([`legendre_in_u`]): the plain
+//! `u P_k(x)`, Legendre polynomials over the gain's range (`legendre_in_u`): the plain
 //! powers up to `u^6` are nearly collinear over 1-9 V, and the columns come from `f32`
 //! simulations. A table of hysteresis is left out: K'(u) scales it and the scale its
 //! reversible slope, a coupling this check does not model.
