@@ -914,17 +914,20 @@ fn curvature_in_place_of(
     var: &[f64],
 ) -> Option<(scale_order::CurvatureFit, Vec<f64>)> {
     let lowest = *scale_order::CURVATURE_ORDERS.start();
+    let excess = |mse: &[f64], i: usize| (mse[i] - var[i]).max(0.0) / var[i].max(f64::MIN_POSITIVE);
+    let shown = (0..var.len()).any(|i| excess(cur_mse, i) >= HIGHER_ORDER_SHOWN_VAR);
     for order in scale_order::CURVATURE_ORDERS {
+        // (the orders above the cubic only where the records show what the model leaves)
+        if order > lowest && !shown {
+            break;
+        }
         let Some(w) = without(order) else {
             continue;
         };
-        let excess = |mse: &[f64], i: usize| (mse[i] - var[i]).max(0.0) / var[i];
-        let shown = (0..var.len()).any(|i| excess(cur_mse, i) >= HIGHER_ORDER_SHOWN_VAR);
         let tells = (0..var.len()).all(|i| {
             excess(&w.mse, i) <= excess(cur_mse, i) / STATIC_TELL_RATIO + LIKE_FOR_LIKE_SLACK_VAR
         });
-        if !leaves_within_of(&w.mse, cur_mse, var, STATIC_TELL_RATIO)
-            || (order > lowest && !(shown && tells))
+        if !leaves_within_of(&w.mse, cur_mse, var, STATIC_TELL_RATIO) || (order > lowest && !tells)
         {
             continue;
         }

@@ -45,7 +45,7 @@
 //! #                               # input (added to every reading; model-gap step 12)
 //!
 //! [nonlinear-gain]                # effect `nonlinear-gain`, K'(u), lowest power first
-//! poly = [1.0, 0.02, -0.001]      # (a fourth value, the cubic term, is optional)
+//! poly = [1.0, 0.02, -0.001]      # (up to four more, the terms to u^6, are optional)
 //! range_v = [0.0, 10.0]
 //!
 //! [slew-rate-limit]               # effect `slew-rate-limit`, at the amplifier output
@@ -101,7 +101,8 @@ where
         .map_err(|_| serde::de::Error::invalid_length(len, &format!("exactly {N} values").as_str()))
 }
 
-/// Three or four values, the missing fourth 0 (K'(u)'s cubic term, which older files lack).
+/// Three to seven values, the missing higher terms 0 (K'(u) to `u^6`; older files hold three
+/// or four).
 fn three_to_seven<'de, D>(d: D) -> Result<[f64; POLY_TERMS], D::Error>
 where
     D: serde::Deserializer<'de>,
