@@ -72,10 +72,13 @@ pub const SCALE_ORDER_SETTLED: f64 = 1e-6;
 /// for the amplifier's limits to act alike on both points).
 pub const SCALE_ORDER_STEPS: [f64; 3] = [4e-2, 1e-2, 1e-3];
 
+/// The cubic: one order above the catalogue's quadratic K'(u), the first order step 14 tries
+/// and the one the scale's like-for-like rival, an offset in its place, is fitted beside.
+pub const CUBIC: usize = 3;
+
 /// The orders of K'(u) step 14 weighs a scale or an offset against, lowest first: from the
-/// cubic (one more than the catalogue's quadratic) to the highest model-core holds
-/// ([`POLY_TERMS`]` - 1`).
-pub const CURVATURE_ORDERS: std::ops::RangeInclusive<usize> = 3..=POLY_TERMS - 1;
+/// [`CUBIC`] to the highest model-core holds ([`POLY_TERMS`]` - 1`).
+pub const CURVATURE_ORDERS: std::ops::RangeInclusive<usize> = CUBIC..=POLY_TERMS - 1;
 
 /// A model refitted with K'(u) of a higher order.
 pub struct CurvatureFit {

@@ -913,7 +913,7 @@ fn curvature_in_place_of(
     cur_mse: &[f64],
     var: &[f64],
 ) -> Option<(scale_order::CurvatureFit, Vec<f64>)> {
-    let lowest = *scale_order::CURVATURE_ORDERS.start();
+    let lowest = scale_order::CUBIC;
     let excess = |mse: &[f64], i: usize| (mse[i] - var[i]).max(0.0) / var[i].max(f64::MIN_POSITIVE);
     let shown = (0..var.len()).any(|i| excess(cur_mse, i) >= HIGHER_ORDER_SHOWN_VAR);
     for order in scale_order::CURVATURE_ORDERS {
@@ -2840,8 +2840,20 @@ fn diagnose_split(
     // record than the curvature of higher order is preferred to it (families case 2968: a
     // 23 mV offset beside a tanh, 1.37 mV, against 2.24 mV for the order-6 curvature alone).
     let swap = || {
-        let w = scale_order::curvature_in_scales_place(&model, &named, data, InPlace::Offset, 3)?;
-        let v = scale_order::curvature_in_scales_place(&model, &named, data, InPlace::Scale, 3)?;
+        let w = scale_order::curvature_in_scales_place(
+            &model,
+            &named,
+            data,
+            InPlace::Offset,
+            scale_order::CUBIC,
+        )?;
+        let v = scale_order::curvature_in_scales_place(
+            &model,
+            &named,
+            data,
+            InPlace::Scale,
+            scale_order::CUBIC,
+        )?;
         (w.mse.iter().zip(&v.mse).all(|(a, b)| a < b) && no_record_worse(&w.mse, &cur_mse))
             .then_some((w, v))
     };
@@ -2854,7 +2866,7 @@ fn diagnose_split(
         &var,
     );
     let (higher, swap) = match higher {
-        Some((w, rival)) if w.order > *scale_order::CURVATURE_ORDERS.start() => match swap() {
+        Some((w, rival)) if w.order > scale_order::CUBIC => match swap() {
             Some((o, v)) if o.mse.iter().zip(&w.mse).all(|(a, b)| a < b) => (None, Some((o, v))),
             _ => (Some((w, rival)), None),
         },
@@ -3869,8 +3881,14 @@ mod tests {
         given.nonlinear_gain = gain(&[1.0, 0.01, -0.002, 0.0]);
         given.sensor_gain = Some(SensorGainSection { gain: 1.003 });
         let (_, given_mse) = simulate_all(&given, &data).unwrap();
-        let w = scale_order::curvature_in_scales_place(&given, &both, &data, InPlace::Nothing, 3)
-            .unwrap();
+        let w = scale_order::curvature_in_scales_place(
+            &given,
+            &both,
+            &data,
+            InPlace::Nothing,
+            scale_order::CUBIC,
+        )
+        .unwrap();
         assert!(w.model.sensor_gain.is_none());
         let poly = w.model.nonlinear_gain.as_ref().unwrap().poly;
         assert!((poly[3] - 1e-4).abs() < 1e-7, "{poly:?}");
@@ -3884,12 +3902,24 @@ mod tests {
         // Only where both are named and no table is (K'(u) scales a table: not modelled here).
         let with_table = named(&["hysteresis", "nonlinear-gain", "sensor-gain"]);
         assert!(
-            scale_order::curvature_in_scales_place(&given, &with_table, &data, InPlace::Nothing, 3)
-                .is_none()
+            scale_order::curvature_in_scales_place(
+                &given,
+                &with_table,
+                &data,
+                InPlace::Nothing,
+                scale_order::CUBIC
+            )
+            .is_none()
         );
         assert!(
-            scale_order::curvature_in_scales_place(&given, &both[..1], &data, InPlace::Nothing, 3)
-                .is_none()
+            scale_order::curvature_in_scales_place(
+                &given,
+                &both[..1],
+                &data,
+                InPlace::Nothing,
+                scale_order::CUBIC
+            )
+            .is_none()
         );
         // A true 2 % scale beside the thesis' quadratic.
         let mut truth = ModelFile::built_in("thesis-linear").unwrap();
@@ -3897,16 +3927,34 @@ mod tests {
         truth.sensor_gain = Some(SensorGainSection { gain: 1.02 });
         let data = sine(&truth);
         let (_, exact) = simulate_all(&truth, &data).unwrap();
-        let w = scale_order::curvature_in_scales_place(&truth, &both, &data, InPlace::Nothing, 3)
-            .unwrap();
+        let w = scale_order::curvature_in_scales_place(
+            &truth,
+            &both,
+            &data,
+            InPlace::Nothing,
+            scale_order::CUBIC,
+        )
+        .unwrap();
         println!(
             "a true 2 % scale: the cubic leaves {:.2} mV",
             1e3 * w.mse[0].sqrt()
         );
         assert!(!leaves_within_of(&w.mse, &exact, &var, STATIC_TELL_RATIO));
         // Like for like, the true scale beside the cubic leaves less than an offset there.
-        let off = scale_order::curvature_in_scales_place(&truth, &both, &data, InPlace::Offset, 3);
-        let sc = scale_order::curvature_in_scales_place(&truth, &both, &data, InPlace::Scale, 3);
+        let off = scale_order::curvature_in_scales_place(
+            &truth,
+            &both,
+            &data,
+            InPlace::Offset,
+            scale_order::CUBIC,
+        );
+        let sc = scale_order::curvature_in_scales_place(
+            &truth,
+            &both,
+            &data,
+            InPlace::Scale,
+            scale_order::CUBIC,
+        );
         let (off, sc) = (off.unwrap(), sc.unwrap());
         assert!(sc.mse[0] < off.mse[0], "{:?} {:?}", sc.mse, off.mse);
         assert!((sc.model.sensor_gain.as_ref().unwrap().gain - 1.02).abs() < 1e-4);
@@ -3921,8 +3969,20 @@ mod tests {
         given.nonlinear_gain = gain(&[1.0, 0.01, -0.002, 0.0]);
         given.offset = None;
         given.sensor_gain = Some(SensorGainSection { gain: 1.003 });
-        let off = scale_order::curvature_in_scales_place(&given, &both, &data, InPlace::Offset, 3);
-        let sc = scale_order::curvature_in_scales_place(&given, &both, &data, InPlace::Scale, 3);
+        let off = scale_order::curvature_in_scales_place(
+            &given,
+            &both,
+            &data,
+            InPlace::Offset,
+            scale_order::CUBIC,
+        );
+        let sc = scale_order::curvature_in_scales_place(
+            &given,
+            &both,
+            &data,
+            InPlace::Scale,
+            scale_order::CUBIC,
+        );
         let (off, sc) = (off.unwrap(), sc.unwrap());
         assert!(off.mse[0] < sc.mse[0], "{:?} {:?}", off.mse, sc.mse);
         assert!(off.model.sensor_gain.is_none());
@@ -3930,8 +3990,14 @@ mod tests {
         assert!((offset_v - 0.025).abs() < 1e-5, "{offset_v}");
         let with_offset = named(&["nonlinear-gain", "sensor-gain", "offset"]);
         assert!(
-            scale_order::curvature_in_scales_place(&truth, &with_offset, &data, InPlace::Offset, 3)
-                .is_none()
+            scale_order::curvature_in_scales_place(
+                &truth,
+                &with_offset,
+                &data,
+                InPlace::Offset,
+                scale_order::CUBIC
+            )
+            .is_none()
         );
     }
 
@@ -3955,9 +4021,14 @@ mod tests {
         given.nonlinear_gain = gain(&[1.0, 0.0, 0.0]);
         given.sensor_gain = Some(SensorGainSection { gain: 1.0 });
         let given = scale_order::refit_order(&given, &both, &data, 2).unwrap();
-        let cubic =
-            scale_order::curvature_in_scales_place(&given.model, &both, &data, InPlace::Nothing, 3)
-                .unwrap();
+        let cubic = scale_order::curvature_in_scales_place(
+            &given.model,
+            &both,
+            &data,
+            InPlace::Nothing,
+            scale_order::CUBIC,
+        )
+        .unwrap();
         assert!(
             !leaves_within_of(&cubic.mse, &given.mse, &var, STATIC_TELL_RATIO),
             "{:?} {:?}",
@@ -4004,7 +4075,8 @@ mod tests {
         given.nonlinear_gain = gain(&[1.0, 0.01, -0.002, 0.0]);
         given.offset = Some(OffsetSection { offset_v: 0.003 });
         let (_, given_mse) = simulate_all(&given, &data).unwrap();
-        let w = scale_order::curvature_in_offsets_place(&given, &both, &data, 3).unwrap();
+        let w = scale_order::curvature_in_offsets_place(&given, &both, &data, scale_order::CUBIC)
+            .unwrap();
         assert!(w.model.offset.is_none());
         let poly = w.model.nonlinear_gain.as_ref().unwrap().poly;
         assert!((poly[3] - 1e-4).abs() < 1e-7, "{poly:?}");
@@ -4020,7 +4092,8 @@ mod tests {
         truth.offset = Some(OffsetSection { offset_v: 0.025 });
         let data = sine(&truth);
         let (_, exact) = simulate_all(&truth, &data).unwrap();
-        let w = scale_order::curvature_in_offsets_place(&truth, &both, &data, 3).unwrap();
+        let w = scale_order::curvature_in_offsets_place(&truth, &both, &data, scale_order::CUBIC)
+            .unwrap();
         println!(
             "a true 25 mV offset: the cubic leaves {:.2} mV",
             1e3 * w.mse[0].sqrt()
@@ -4028,9 +4101,15 @@ mod tests {
         assert!(!leaves_within_of(&w.mse, &exact, &var, STATIC_TELL_RATIO));
         for other in ["hysteresis", "drift"] {
             let with = named(&["nonlinear-gain", "offset", other]);
-            assert!(scale_order::curvature_in_offsets_place(&truth, &with, &data, 3).is_none());
+            assert!(
+                scale_order::curvature_in_offsets_place(&truth, &with, &data, scale_order::CUBIC)
+                    .is_none()
+            );
         }
-        assert!(scale_order::curvature_in_offsets_place(&truth, &both[..1], &data, 3).is_none());
+        assert!(
+            scale_order::curvature_in_offsets_place(&truth, &both[..1], &data, scale_order::CUBIC)
+                .is_none()
+        );
     }
 
     /// Step 12 reads an offset as the drift's start only where it is the settled creep at
