@@ -428,7 +428,8 @@ const TALLY_HEADER: &str =
     "                         cases   exact  false / given          missed  clean named  s/case";
 
 /// Runs the drawn cases (release, the README's test command: 100, seeds 1000..1099,
-/// `GAP_CASES` changes the count, `GAP_FIRST` the first seed, `GAP_SEED=N` runs case N alone;
+/// `GAP_CASES` changes the count, `GAP_FIRST` the first seed, `GAP_SEED=N` runs case N alone
+/// (`GAP_ALL` prints the cases named exactly too);
 /// debug builds run 6), prints
 /// the confusion table and the tallies by family, hidden effect and truth form, and returns the
 /// overall tally (`None` for a single case).
@@ -470,6 +471,12 @@ fn run_suite() -> Option<Tally> {
             println!(
                 "CUT seed {seed} {f} (final {:.2}x floor) {}",
                 o.final_over_floor, o.describe
+            );
+        }
+        if o.truth == o.named && std::env::var("GAP_ALL").is_ok() {
+            println!(
+                "PASS seed {seed} truth {:?} (final {:.2}x floor) {}",
+                o.truth, o.final_over_floor, o.describe
             );
         }
         if o.truth != o.named {
