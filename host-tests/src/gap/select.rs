@@ -694,18 +694,21 @@ fn creep_and_loop(
     if !shown || CREEP_AND_LOOP.iter().any(|e| catalogue::present(model, e)) {
         return None;
     }
-    let (m, sims, mse) = fit_slow_set(model, data, slow_x, &CREEP_AND_LOOP, u_range)?;
-    Some(Candidate {
-        effect: CREEP_AND_LOOP.join("+"),
+    let fitted = fit_slow_set(model, data, slow_x, &CREEP_AND_LOOP, u_range)?;
+    Some(joint_candidate(&CREEP_AND_LOOP, fitted))
+}
+
+/// Effects fitted together as one step's candidate (`a+b`), its score counting the
+/// parameters of each.
+fn joint_candidate(effects: &[&str], (model, sims, mse): Fitted) -> Candidate {
+    Candidate {
+        effect: effects.join("+"),
         refit: false,
-        model: m,
-        k: CREEP_AND_LOOP
-            .iter()
-            .map(|e| catalogue::param_count(e))
-            .sum(),
+        model,
+        k: effects.iter().map(|e| catalogue::param_count(e)).sum(),
         sims,
         mse,
-    })
+    }
 }
 
 /// A creep and a loop, fitted as one step on held levels that show both.
@@ -741,20 +744,10 @@ fn creep_from_first_input(
     {
         return None;
     }
-    let (m, sims, mse) = fit_slow_set(model, data, slow_x, &CREEP_FROM_FIRST, u_range)?;
+    let fitted = fit_slow_set(model, data, slow_x, &CREEP_FROM_FIRST, u_range)?;
     let named: Vec<String> = CREEP_FROM_FIRST.iter().map(|e| e.to_string()).collect();
-    creep_start(&m, &named, data, noise)?;
-    Some(Candidate {
-        effect: CREEP_FROM_FIRST.join("+"),
-        refit: false,
-        model: m,
-        k: CREEP_FROM_FIRST
-            .iter()
-            .map(|e| catalogue::param_count(e))
-            .sum(),
-        sims,
-        mse,
-    })
+    creep_start(&fitted.0, &named, data, noise)?;
+    Some(joint_candidate(&CREEP_FROM_FIRST, fitted))
 }
 
 /// The drift and the offset its start takes back, fitted as one step.
