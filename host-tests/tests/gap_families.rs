@@ -320,12 +320,12 @@ fn run_case(seed: u64) -> Outcome {
     if std::env::var("GAP_TELL").is_ok() {
         for c in &d.cannot_tell {
             println!(
-                "TELL seed {seed} {} / {} {:?} with {:.3} without {:.3} floor {:.3}",
+                "TELL seed {seed} {} / {} {:?} rms {:.3} alternative {:.3} floor {:.3} mV",
                 c.named,
                 c.alternative,
                 c.taken_out,
-                1e3 * c.alternative_rms_v,
                 1e3 * c.rms_v,
+                1e3 * c.alternative_rms_v,
                 1e3 * d.noise_floor_v,
             );
         }
@@ -442,7 +442,7 @@ const TALLY_HEADER: &str =
 
 /// Runs the drawn cases (release, the README's test command: 100, seeds 1000..1099,
 /// `GAP_CASES` changes the count, `GAP_FIRST` the first seed, `GAP_SEED=N` runs case N alone
-/// (`GAP_ALL` prints the cases named exactly too);
+/// (`GAP_ALL` prints the cases named exactly too, `GAP_TELL` each case's `cannot_tell` pairs);
 /// debug builds run 6), prints
 /// the confusion table and the tallies by family, hidden effect and truth form, and returns the
 /// overall tally (`None` for a single case).

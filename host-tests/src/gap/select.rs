@@ -721,7 +721,7 @@ const CREEP_AND_LOOP: [&str; 2] = ["drift", "hysteresis"];
 /// a random level) reads the lags' settled creep less than the model at every sample, a
 /// constant `-sum g_k K(u0) u0`. The drift alone cannot fit that: its gains pay the constant
 /// at every sample and come out at zero (families case 3131, a power-law creep on random
-/// levels from 5.2 V: the drift explained nothing at the first two steps, and a curvature, a
+/// levels from 8.5 V: the drift explained nothing at the first two steps, and a curvature, a
 /// scale and a loop were named in its place at the floor). Fitted beside an offset, the
 /// drift's gains are free of it, and the pair is offered only where the fitted offset is
 /// that settled creep taken back ([`creep_start`], within its share): step 12 then moves it
@@ -1439,8 +1439,9 @@ fn diagnose_split(
     // before that step (the model they were compared beside).
     let mut look_alikes: Vec<(String, String, Vec<String>)> = Vec::new();
     let any_hold = data.iter().any(Data::has_hold);
-    // The first table the memoryless twin kept out (steps 16 and 16a): (the share the table explained, the twin's, the RMS each
-    // left), for the pair said at the end where nothing else took the residual down.
+    // The first table the memoryless twin kept out (steps 16 and 16a): (the share the table
+    // explained, the twin's, the RMS each left), for the pair said at the end where the
+    // records keep an unexplained part.
     let mut twin_untold: Option<(f64, f64, f64, f64)> = None;
 
     for _ in 0..MAX_STEPS {
@@ -3062,55 +3063,6 @@ fn diagnose_split(
         }
     });
     cannot_tell.extend(ambiguous);
-    // (never silent: where the twin kept a table out at a step and the records still end
-    // above twice their floor with no table named, the loop and a map of the input alone
-    // explained them alike, and the catalogue's curvature is the one memoryless shape it
-    // names: say so, with what each left then. Families case 3219, a Preisach loop and a
-    // scale on random levels that reach each of their nine levels once: the table explained
-    // all but 3e-6 of the residual above the floor and a map through the nine levels all of
-    // it, and nothing was named or reported at 227x the floor.)
-    let above = cur_mse.iter().zip(&var).any(|(m, v)| {
-        *m > super::unexplained::UNEXPLAINED_FLOOR_RATIO
-            * super::unexplained::UNEXPLAINED_FLOOR_RATIO
-            * v
-    });
-    if let Some((t_ex, twin_ex, t_rms, twin_rms)) = twin_untold
-        && above
-        && !named.iter().any(|n| n == "hysteresis")
-    {
-        // (the curvature is the named side where a step named it)
-        let curve_named = named.iter().any(|n| n == "nonlinear-gain");
-        let (one, other) = if curve_named {
-            ("nonlinear-gain", "hysteresis")
-        } else {
-            ("hysteresis", "nonlinear-gain")
-        };
-        let (rms_v, alternative_rms_v) = if curve_named {
-            (twin_rms, t_rms)
-        } else {
-            (t_rms, twin_rms)
-        };
-        cannot_tell.push(CannotTell {
-            named: one.into(),
-            alternative: other.into(),
-            neither_named: !curve_named,
-            taken_out: TakenOut::No,
-            rms_v,
-            alternative_rms_v,
-            why: format!(
-                "a hysteresis table would explain {:.1} % of the residual power above the noise \
-                 floor (leaving {:.2} mV) and a map of the input alone (a curvature on the \
-                 table's nodes, finer than K'(u)'s) {:.1} % ({:.2} mV): what the map leaves shows no \
-                 loop, nor held levels apart by the direction into them, so the records show \
-                 no memory a map cannot follow, and the loop is not named; levels reached from \
-                 both sides (the recommended protocol) tell a loop from a curve",
-                100.0 * t_ex,
-                1e3 * t_rms,
-                100.0 * twin_ex,
-                1e3 * twin_rms
-            ),
-        });
-    }
     // Step 12: an offset that is the settled creep at the records' first input taken back is
     // the drift's start (the creep counts from the first input), not the sensor's zero: the
     // constant moves into `[drift] unsettled_v` (the same readings), the offset is no longer
@@ -3282,6 +3234,45 @@ fn diagnose_split(
         });
     }
     let (unexplained, cycle_notes) = locate(data, &sims, &noise, &cycle_bar);
+    // (never silent: where the twin kept a table out at a step and the records end with an
+    // unexplained part and no table named, the loop and a map of the input alone explained
+    // them alike, and the catalogue's curvature is the one memoryless shape it names: say so,
+    // with what each left then. Families case 3219, a Preisach loop and a scale on random
+    // levels that reach each of their nine levels once: the table explained all but 3e-6 of
+    // the residual above the floor and a map through the nine levels all of it, and nothing
+    // was named or reported at 227x the floor.)
+    if let Some((t_ex, twin_ex, t_rms, twin_rms)) = twin_untold
+        && unexplained.is_some()
+        && !named.iter().any(|n| n == "hysteresis")
+    {
+        // (the curvature is the named side where a step named it)
+        let curve_named = named.iter().any(|n| n == "nonlinear-gain");
+        let (one, other, rms_v, alternative_rms_v) = if curve_named {
+            ("nonlinear-gain", "hysteresis", twin_rms, t_rms)
+        } else {
+            ("hysteresis", "nonlinear-gain", t_rms, twin_rms)
+        };
+        cannot_tell.push(CannotTell {
+            named: one.into(),
+            alternative: other.into(),
+            neither_named: !curve_named,
+            taken_out: TakenOut::No,
+            rms_v,
+            alternative_rms_v,
+            why: format!(
+                "a hysteresis table would explain {:.1} % of the residual power above the noise \
+                 floor (leaving {:.2} mV) and a map of the input alone (a curvature on the \
+                 table's nodes, finer than K'(u)'s) {:.1} % ({:.2} mV): what the map leaves \
+                 shows no loop, nor held levels apart by the direction into them, so the \
+                 records show no memory a map cannot follow, and the loop is not named; levels \
+                 reached from both sides (the recommended protocol) tell a loop from a curve",
+                100.0 * t_ex,
+                1e3 * t_rms,
+                100.0 * twin_ex,
+                1e3 * twin_rms
+            ),
+        });
+    }
     let final_rms_v = (cur_mse.iter().sum::<f64>() / cur_mse.len() as f64).sqrt();
     let mut noise_notes = setup.noise_notes.clone();
     noise_notes.extend(cycle_notes);
