@@ -442,7 +442,8 @@ const TALLY_HEADER: &str =
 
 /// Runs the drawn cases (release, the README's test command: 100, seeds 1000..1099,
 /// `GAP_CASES` changes the count, `GAP_FIRST` the first seed, `GAP_SEED=N` runs case N alone
-/// (`GAP_ALL` prints the cases named exactly too, `GAP_TELL` each case's `cannot_tell` pairs);
+/// (`GAP_ALL` prints the cases named exactly too, `GAP_TELL` each case's `cannot_tell` pairs,
+/// `GAP_DRAW` each case's truth alone, without diagnosing it);
 /// debug builds run 6), prints
 /// the confusion table and the tallies by family, hidden effect and truth form, and returns the
 /// overall tally (`None` for a single case).
@@ -467,6 +468,19 @@ fn run_suite() -> Option<Tally> {
         Some(s) => s,
         None => (first..first + n_cases).collect(),
     };
+    // (`GAP_DRAW`: each case's truth and protocol, without a diagnosis, to pick the cases of
+    // one kind from many seeds)
+    if std::env::var("GAP_DRAW").is_ok() {
+        for &seed in &seeds {
+            let case = Case::draw(seed);
+            println!(
+                "DRAW seed {seed} truth {:?} {}",
+                case.effects,
+                case.describe()
+            );
+        }
+        return None;
+    }
     let started = std::time::Instant::now();
     let outcomes = host_tests::util::par_map(&seeds, |s| run_case(*s));
     let elapsed_s = started.elapsed().as_secs_f64();
