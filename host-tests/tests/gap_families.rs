@@ -446,7 +446,8 @@ const TALLY_HEADER: &str =
 /// `GAP_DRAW` each case's truth alone, without diagnosing it);
 /// debug builds run 6), prints
 /// the confusion table and the tallies by family, hidden effect and truth form, and returns the
-/// overall tally (`None` for a single case).
+/// overall tally (`None` for a chosen list of seeds, or for `GAP_DRAW`, which diagnoses
+/// nothing).
 fn run_suite() -> Option<Tally> {
     let release = !cfg!(debug_assertions);
     let n_cases: u64 = std::env::var("GAP_CASES")
