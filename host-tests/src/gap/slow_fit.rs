@@ -330,6 +330,31 @@ impl SlowRegressors {
         self.rebuilt(data, &self.start_v, form)
     }
 
+    /// The same regressors for records whose outputs differ from those these were built on
+    /// and whose inputs do not (step 19's outputs divided by a sensor scale): the columns,
+    /// which depend on the inputs alone, shared; the products with targets and the fits kept,
+    /// which depend on the outputs, left behind.
+    pub(super) fn for_other_outputs(&self) -> SlowRegressors {
+        SlowRegressors {
+            cols: self.cols.clone(),
+            rows: self.rows.clone(),
+            drive: self.drive.clone(),
+            u_fit: self.u_fit.clone(),
+            hyst: self.hyst.clone(),
+            range: self.range,
+            kprime: self.kprime,
+            kprime_range: self.kprime_range,
+            moments: self.moments.clone(),
+            start_v: self.start_v.clone(),
+            form: self.form,
+            table_gain: self.table_gain,
+            gram: self.gram.clone(),
+            products: Default::default(),
+            lag_parent: Vec::new(),
+            fits: Default::default(),
+        }
+    }
+
     /// The regressors on the same rows with the hysteresis basis computed afresh.
     fn rebuilt(&self, data: &[Data], start_v: &[f64], form: everett::CentreLine) -> Self {
         let rows = SolveRows {

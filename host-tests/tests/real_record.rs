@@ -1,0 +1,119 @@
+//! The model-gap workflow on a measured record of a real piezoelectric actuator (issue #12's
+//! "real laboratory record"; `tests/data/README.md` says where it comes from, how it is read
+//! as a record of the P-753 loop, and its licence).
+//!
+//! The actuator is not the lab's P-753 and its record is not the recommended protocol: one
+//! 10 s record at 5 kHz, a rest at the middle of the range, then a 1 Hz sine over the whole
+//! range that starts with a jump. Against `thesis-linear` it leaves a loop 14 % of its span
+//! wide, which issue #12 found named by nothing at 42x the floor. What this test asserts is
+//! what any diagnosis of it must say, not the figures it came to (GAP.md, session 53):
+//! the loop is named, the residual ends within [`FINAL_FLOOR_MAX`] of the floor, and what is
+//! left above 2x the floor is said, with the jump's second among where it sits. The record
+//! was read while step 19 was written, so it is not a held-out case.
+
+use host_tests::gap::{Data, Options, diagnose};
+use host_tests::io::csv::Record;
+use host_tests::io::model_file::ModelFile;
+
+/// The record, as published (columns: empty index, time s, displacement um, drive V).
+const RECORD: &str = include_str!("data/smarthysteresis_v150_1hz.csv");
+
+/// The drive's amplitude, volts: mapped onto the amplifier's 0-10 V control input (our
+/// assumption, `tests/data/README.md`).
+const DRIVE_AMPLITUDE_V: f64 = 150.0;
+
+/// The final residual may end at most this many times the noise floor (our bound: before
+/// session 53 it ended at 4.08x, after at 2.19x; about half of what is left sits in the
+/// second after the sine's opening jump, the actuator's own step response, which no
+/// catalogued effect of the P-753 loop has).
+const FINAL_FLOOR_MAX: f64 = 3.0;
+
+/// The floor read from the record may stand this far below the noise at its rest (the
+/// first differences of the first 3.2 s, 9.2 mV): the 4.6 Hz lines and the slow wander of
+/// the rest are not the sensor's white noise (our bound; the floor reads 8.3 mV).
+const FLOOR_OF_REST_MIN: f64 = 0.7;
+
+fn record(base: &ModelFile) -> Data {
+    let (mut t, mut d, mut v) = (Vec::new(), Vec::new(), Vec::new());
+    for line in RECORD.lines() {
+        let f: Vec<f64> = line
+            .split(',')
+            .skip(1)
+            .map(|x| x.trim().parse::<f64>().expect("a number"))
+            .collect();
+        t.push(f[0]);
+        d.push(f[1]);
+        v.push(f[2]);
+    }
+    let u: Vec<f64> = v
+        .iter()
+        .map(|v| 5.0 * (v + DRIVE_AMPLITUDE_V) / DRIVE_AMPLITUDE_V)
+        .collect();
+    // y = a d + b: least squares of the plant's static gain times u over the sine.
+    let from = v.iter().position(|v| *v != 0.0).expect("the sine starts");
+    let g = base.plant.static_gain;
+    let n = (d.len() - from) as f64;
+    let (sd, st) = (
+        d[from..].iter().sum::<f64>(),
+        u[from..].iter().map(|u| g * u).sum::<f64>(),
+    );
+    let (md, mt) = (sd / n, st / n);
+    let sdd: f64 = d[from..].iter().map(|x| (x - md).powi(2)).sum();
+    let sdt: f64 = d[from..]
+        .iter()
+        .zip(&u[from..])
+        .map(|(x, u)| (x - md) * (g * u - mt))
+        .sum();
+    let a = sdt / sdd;
+    let b = mt - a * md;
+    let y: Vec<f64> = d.iter().map(|x| a * x + b).collect();
+    Data::from_record(
+        "smarthysteresis.csv",
+        Record::new(t, u, Some(y), None).unwrap(),
+    )
+    .unwrap()
+}
+
+/// A measured actuator's loop is named, its residual ends near the floor, and what is left is
+/// said where it sits (the opening jump's second).
+#[test]
+fn a_measured_actuators_loop_is_named_and_what_is_left_is_said() {
+    let base = ModelFile::load("thesis-linear").unwrap();
+    let data = record(&base);
+    let rest: Vec<f64> = data
+        .t_s
+        .iter()
+        .zip(&data.y_v)
+        .filter(|(t, _)| **t < 3.2)
+        .map(|(_, y)| *y)
+        .collect();
+    let rest_noise_v = (rest.windows(2).map(|w| (w[1] - w[0]).powi(2)).sum::<f64>()
+        / (2.0 * (rest.len() - 1) as f64))
+        .sqrt();
+    let d = diagnose(&base, std::slice::from_ref(&data), &Options::default()).unwrap();
+    let ratio = d.final_rms_v / d.noise_floor_v;
+    eprintln!(
+        "named {:?}; floor {:.2} mV (rest {:.2} mV); final {:.2} mV = {:.2}x; unexplained {:?}",
+        d.named,
+        1e3 * d.noise_floor_v,
+        1e3 * rest_noise_v,
+        1e3 * d.final_rms_v,
+        ratio,
+        d.unexplained.as_ref().map(|u| &u.where_)
+    );
+    assert!(d.named.iter().any(|n| n == "hysteresis"), "{:?}", d.named);
+    assert!(
+        d.noise_floor_v >= FLOOR_OF_REST_MIN * rest_noise_v && d.noise_floor_v <= rest_noise_v,
+        "floor {:.2} mV against the rest's {:.2} mV",
+        1e3 * d.noise_floor_v,
+        1e3 * rest_noise_v
+    );
+    assert!(ratio <= FINAL_FLOOR_MAX, "final {ratio:.2}x the floor");
+    if ratio > 2.0 {
+        let u = d
+            .unexplained
+            .as_ref()
+            .expect("never silent above 2x the floor");
+        assert!(u.where_.contains("t = 3."), "{}", u.where_);
+    }
+}
