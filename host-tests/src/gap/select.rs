@@ -549,11 +549,20 @@ fn offset_into_table(model: &ModelFile) -> Option<(ModelFile, f64)> {
 }
 
 /// `model` with its `[sensor-gain]` and `[offset]` moved into its hysteresis table's own map
-/// (step 19): the Everett values, the table's level and the drift's gains (and its unsettled
-/// constant) times the scale (everything before the sensor, the plant of unity static gain
-/// between), then the offset into the table's level ([`offset_into_table`]). `None` without a
-/// table in grid form. The caller checks the readings are the same.
+/// (step 19): the Everett values, the table's level and the drift's gains times the scale
+/// (everything before the sensor, the plant of unity static gain between), then the offset
+/// into the table's level ([`offset_into_table`]). `None` without a table in grid form, or
+/// with a drift's unsettled constant (step 12's: it is read after the sensor's gain, as the
+/// offset is, and step 19 does not run beside it). The caller checks the readings are the
+/// same.
 fn centre_line_into_table(model: &ModelFile) -> Option<ModelFile> {
+    if model
+        .drift
+        .as_ref()
+        .is_some_and(|d| d.unsettled_v.is_some())
+    {
+        return None;
+    }
     let scale = model.sensor_gain.as_ref().map_or(1.0, |g| g.gain);
     let mut m = model.clone();
     let h = m.hysteresis.as_mut()?;
@@ -564,9 +573,6 @@ fn centre_line_into_table(model: &ModelFile) -> Option<ModelFile> {
     if let Some(d) = m.drift.as_mut() {
         for g in &mut d.gains {
             *g *= scale;
-        }
-        if let Some(c) = d.unsettled_v.as_mut() {
-            *c *= scale;
         }
     }
     m.sensor_gain = None;
@@ -600,8 +606,8 @@ fn loop_width_v(model: &ModelFile) -> Option<f64> {
         .reduce(f64::max)
 }
 
-/// Reductions of step 19's bracket of scales (0.618^14 of its width: 0.05 %, below what a
-/// centre line's residual tells).
+/// Reductions of step 19's bracket of scales (0.618^14 = 0.12 % of its width, 5e-4 in the
+/// scale: below what a centre line's residual tells).
 const CENTRE_SCALE_ITERATIONS: usize = 14;
 
 /// Step 19's fit: the table and an offset refitted beside a sensor scale held fixed, the
@@ -673,7 +679,9 @@ fn centre_line_fit(
         .collect();
     // (its regressors, built on the scaled records, stay here: the caller's are keyed by the
     // same models without slow effects, on the records' own outputs)
-    if let Some(f) = super::start::search(&inner, &scaled_data, &x, u_range, &inner_mse) {
+    if let Some(f) = super::start::search(&inner, &scaled_data, &x, u_range, &inner_mse)
+        && loop_width_v(&f.model).is_some_and(|w| best * w <= CENTRE_WIDTH_RATIO * width_now)
+    {
         let m = read_back(f.model, best);
         if let Ok((sims, _)) = simulate_all(&m, data) {
             return Some((m, sims));
@@ -3348,6 +3356,7 @@ fn diagnose_split(
         && !named.iter().any(|n| n == "sensor-gain" || n == "offset")
         && !catalogue::present(&model, "sensor-gain")
         && !catalogue::present(&model, "offset")
+        && model.drift.as_ref().is_none_or(|d| d.unsettled_v.is_none())
         && !at_floor_now(&cur_mse, &var)
         && let Some((with, with_sims)) = centre_line_fit(&model, data, &slow_x, u_range, &var)
         && let Some(scale) = with.sensor_gain.as_ref().map(|g| g.gain)

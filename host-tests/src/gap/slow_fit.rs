@@ -333,7 +333,9 @@ impl SlowRegressors {
     /// The same regressors for records whose outputs differ from those these were built on
     /// and whose inputs do not (step 19's outputs divided by a sensor scale): the columns,
     /// which depend on the inputs alone, shared; the products with targets and the fits kept,
-    /// which depend on the outputs, left behind.
+    /// which depend on the outputs, left behind. Those caches are keyed by the model without
+    /// slow effects alone, which is the same whatever the outputs: one set of regressors from
+    /// here must serve one set of outputs (step 19 takes a fresh one for every scale).
     pub(super) fn for_other_outputs(&self) -> SlowRegressors {
         SlowRegressors {
             cols: self.cols.clone(),
