@@ -28,6 +28,9 @@ const DRIVE_AMPLITUDE_V: f64 = 150.0;
 /// actuator's own step response, which no catalogued effect of the P-753 loop has).
 const FINAL_FLOOR_MAX: f64 = 3.0;
 
+/// The end of the record's rest, seconds (the sine starts at 3.2572 s).
+const REST_END_S: f64 = 3.2;
+
 /// The floor read from the record may stand this far below the noise at its rest (the
 /// first differences of the first 3.2 s, 9.2 mV): the 4.6 Hz lines and the slow wander of
 /// the rest are not the sensor's white noise (our bound; the floor reads 8.3 mV).
@@ -104,7 +107,7 @@ fn diagnosed_near_the_floor(base: &ModelFile, cal: Calibration) {
         .t_s
         .iter()
         .zip(&data.y_v)
-        .filter(|(t, _)| **t < 3.2)
+        .filter(|(t, _)| **t < REST_END_S)
         .map(|(_, y)| *y)
         .collect();
     let rest_noise_v = (rest.windows(2).map(|w| (w[1] - w[0]).powi(2)).sum::<f64>()
