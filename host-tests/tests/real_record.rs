@@ -11,6 +11,7 @@
 //! left above 2x the floor is said, with the jump's second among where it sits. The record
 //! was read while step 19 was written, so it is not a held-out case.
 
+use host_tests::gap::data::LineFit;
 use host_tests::gap::{Data, Options, diagnose};
 use host_tests::io::csv::Record;
 use host_tests::io::model_file::ModelFile;
@@ -21,6 +22,9 @@ const RECORD: &str = include_str!("data/smarthysteresis_v150_1hz.csv");
 /// The drive's amplitude, volts: mapped onto the amplifier's 0-10 V control input (our
 /// assumption, `tests/data/README.md`).
 const DRIVE_AMPLITUDE_V: f64 = 150.0;
+
+/// The control input's span the drive is mapped onto, volts (the thesis' 0-10 V range).
+const CONTROL_SPAN_V: f64 = 10.0;
 
 /// The final residual may end at most this many times the noise floor (our bound: before
 /// session 53 it ended at 4.08x and 9.2x with the two calibrations, after at 2.19x and
@@ -60,29 +64,19 @@ fn record(base: &ModelFile, cal: Calibration) -> Data {
     }
     let u: Vec<f64> = v
         .iter()
-        .map(|v| 5.0 * (v + DRIVE_AMPLITUDE_V) / DRIVE_AMPLITUDE_V)
+        .map(|v| CONTROL_SPAN_V * (v + DRIVE_AMPLITUDE_V) / (2.0 * DRIVE_AMPLITUDE_V))
         .collect();
-    // y = a d + b: least squares of the plant's static gain times u over the sine.
+    // y = a d + b: the least squares line of the plant's static gain times u on d.
     let from = match cal {
         Calibration::OverTheSine => v.iter().position(|v| *v != 0.0).expect("the sine starts"),
         Calibration::OverTheRecord => 0,
     };
-    let g = base.plant.static_gain;
-    let n = (d.len() - from) as f64;
-    let (sd, st) = (
-        d[from..].iter().sum::<f64>(),
-        u[from..].iter().map(|u| g * u).sum::<f64>(),
-    );
-    let (md, mt) = (sd / n, st / n);
-    let sdd: f64 = d[from..].iter().map(|x| (x - md).powi(2)).sum();
-    let sdt: f64 = d[from..]
+    let target: Vec<f64> = u[from..]
         .iter()
-        .zip(&u[from..])
-        .map(|(x, u)| (x - md) * (g * u - mt))
-        .sum();
-    let a = sdt / sdd;
-    let b = mt - a * md;
-    let y: Vec<f64> = d.iter().map(|x| a * x + b).collect();
+        .map(|u| base.plant.static_gain * u)
+        .collect();
+    let line = LineFit::of(&target, &d[from..]).expect("samples to fit");
+    let y: Vec<f64> = d.iter().map(|x| line.at(*x)).collect();
     Data::from_record(
         "smarthysteresis.csv",
         Record::new(t, u, Some(y), None).unwrap(),

@@ -597,9 +597,9 @@ const CENTRE_SCALES: (f64, f64) = (0.8, 1.25);
 const CENTRE_WIDTH_RATIO: f64 = CANNOT_TELL_RATIO;
 
 /// The widest loop of `model`'s hysteresis table over its range, sensor volts (the larger of
-/// [`catalogue::params_of`]'s two widths).
+/// [`super::everett::summary`]'s two widths).
 fn loop_width_v(model: &ModelFile) -> Option<f64> {
-    catalogue::params_of(model, "hysteresis")
+    super::everett::summary(model.hysteresis.as_ref()?)
         .into_iter()
         .filter(|(k, _)| k.starts_with("loop_width"))
         .map(|(_, v)| v)
