@@ -832,6 +832,29 @@ fn a_sine_of_the_thesis_stage_keeps_its_drift() {
     assert!(drift.evidence.starts_with("no hold"), "{}", drift.evidence);
 }
 
+/// A record averaged from a faster one (as `piezo gap` averages records beyond its samples
+/// bound, `gap::data::decimate_to_fit`) is diagnosed as the record above, sampled at the
+/// averaged rate, is: the same sine of the full thesis stage at 20 kHz, averaged by 4 to
+/// 5 kHz, names the same three effects and ends within the same 2x of its floor (which the
+/// average lowers by half). The simulations run on the input at 20 kHz and are averaged
+/// alike; the workflow reads the averaged input's middle samples.
+#[test]
+fn an_averaged_record_is_read_as_one_sampled_slower() {
+    let truth = ModelFile::built_in("thesis-full").unwrap();
+    let stage = truth.build_stage().unwrap();
+    let (t, u) = raised_cosine(20_000.0, 10.0, 1.0, 4.5, 4.5);
+    let y = simulate(&stage, truth.period_s, &t, &u);
+    let fine = Data::from_record("sine.csv", Record::new(t, u, Some(y), None).unwrap()).unwrap();
+    let averaged = gap::data::decimated(&fine, 4);
+    assert!((1.0 / averaged.period_s() - 5_000.0).abs() < 1e-6);
+    let base = ModelFile::built_in("thesis-linear").unwrap();
+    let d = diagnose(&base, &[averaged], &Options::default()).unwrap();
+    println!("{}", d.table());
+    let ratio = d.final_rms_v / d.noise_floor_v;
+    assert_thesis_slow_effects_named(&d);
+    assert!(ratio <= 2.0, "final {ratio:.2}x the floor");
+}
+
 /// Records of `truth` on the identification protocol (`slow_s` seconds of slow record), each
 /// record with its own noise seed.
 fn protocol_data(truth: &ModelFile, slow_s: f64) -> Vec<Data> {

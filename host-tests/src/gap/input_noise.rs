@@ -103,6 +103,8 @@ pub fn measured_input_noise(
     let with_input = |u_v: Vec<f64>| Data {
         u_v,
         memo: Default::default(),
+        // (another input: an averaged record's own input no longer drives it)
+        fine: None,
         ..d.clone()
     };
     let u_floor = noise_floor_of(&as_output(d.u_v.clone()), None);

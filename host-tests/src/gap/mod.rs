@@ -87,5 +87,5 @@ pub mod start;
 pub mod unexplained;
 
 pub use constants::*;
-pub use data::{Data, load_data, min_max, mse, noise_floor, sim};
+pub use data::{Data, decimate_to_fit, load_data, min_max, mse, noise_floor, sim};
 pub use select::{CannotTell, Diagnosis, Options, STANDING_OFFSET_NOTE, Step, diagnose};

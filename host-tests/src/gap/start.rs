@@ -124,6 +124,7 @@ fn head(d: &Data, k: usize) -> Data {
         y_v: d.y_v[..k].to_vec(),
         hold_band_v: d.hold_band_v,
         memo: Default::default(),
+        fine: d.fine.as_ref().map(|f| std::sync::Arc::new(f.head(k))),
     }
 }
 

@@ -162,7 +162,8 @@ pub fn bound_gap_within(
     if samples > GAP_MAX_SAMPLES {
         bail!(
             "the records hold {samples} samples in all, more than the {GAP_MAX_SAMPLES} the model-gap \
-             workflow takes (up to 1 GB per million): decimate them or cut them shorter"
+             workflow takes (up to 1 GB per million), after averaging every record down to no \
+             less than 1 kHz: cut them shorter"
         );
     }
     let steps = records

@@ -17,9 +17,16 @@
 //! (the band split left less than the span split); `by_diagnosis` only where both
 //! splits' diagnoses ran: `{"split", "named", "final_noise_var"}` of the one not kept), a
 //! progress bar to stderr.
+//!
+//! Records that hold more than [`checks::GAP_MAX_SAMPLES`] samples in all are averaged in
+//! blocks down to [`GAP_DECIMATED_SAMPLES`] ([`decimate_to_fit`]; a 150 s record at the
+//! DS1103's 50 kHz is read at 6.25 kHz), each with a `noise_notes` entry that says so; only
+//! records that cannot be averaged that far without going below 1 kHz are refused.
 
 use clap::Args;
-use host_tests::gap::{Options, diagnose, load_data, report};
+use host_tests::gap::{
+    GAP_DECIMATED_SAMPLES, Options, decimate_to_fit, diagnose, load_data, report,
+};
 use host_tests::io::checks;
 use host_tests::io::model_file::ModelFile;
 use std::path::{Path, PathBuf};
@@ -60,12 +67,15 @@ pub fn run(a: &GapArgs) -> anyhow::Result<()> {
     }
     let base = ModelFile::load(&a.model)?;
     let data = load_data(&a.data, a.vars.as_deref())?;
+    // Records too long for the fits are averaged down, and their notes say so.
+    let (data, averaged) = decimate_to_fit(data, checks::GAP_MAX_SAMPLES, GAP_DECIMATED_SAMPLES);
     let sizes: Vec<(String, usize, f64)> = data
         .iter()
         .map(|d| (d.name.clone(), d.len(), d.t_s[d.len() - 1] - d.t_s[0]))
         .collect();
     checks::bound_gap(&sizes, base.period_s)?;
-    let d = diagnose(&base, &data, &Options { progress: true })?;
+    let mut d = diagnose(&base, &data, &Options { progress: true })?;
+    d.noise_notes.splice(0..0, averaged);
     // A figure that came out NaN or infinite is an error, before anything is written.
     // `unexplained` is null by design when every record ends near its floor; every other
     // figure must be finite.
