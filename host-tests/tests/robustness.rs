@@ -201,6 +201,34 @@ fn gap_refuses_too_many_samples_with_their_count() {
     checks::bound_gap(&ok, 2e-5).expect("a small record runs");
 }
 
+/// A record averaged from a faster one (`piezo gap` averages records beyond the samples
+/// bound) is bounded by what its fits hold and by the work of its simulations, which run at
+/// its own rate: 150 s at 50 kHz held as 1 M samples runs (7.5e6 steps a pass), 600 s at
+/// 50 kHz held as 1 M is refused by its work, with the setting named.
+#[test]
+fn gap_bounds_an_averaged_record_by_its_simulations() {
+    if std::env::var_os(checks::MAX_STEPS_ENV).is_some() {
+        return; // the bound is the caller's
+    }
+    let limit = checks::gap_max_stage_steps();
+    let held = vec![("slow.csv".to_string(), 1_000_000, 150.0)];
+    let simulated = vec![("slow.csv".to_string(), 7_500_000, 150.0)];
+    checks::bound_gap_simulated(&held, &simulated, 2e-5, limit).expect("150 s at 50 kHz runs");
+    let held = vec![("slow.csv".to_string(), 1_000_000, 600.0)];
+    let simulated = vec![("slow.csv".to_string(), 30_000_000, 600.0)];
+    let e = checks::bound_gap_simulated(&held, &simulated, 2e-5, limit)
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains(checks::MAX_STEPS_ENV), "{e}");
+    // The samples bound is on what the fits hold.
+    let held = vec![("slow.csv".to_string(), 2_500_000, 50.0)];
+    let simulated = vec![("slow.csv".to_string(), 2_500_000, 50.0)];
+    let e = checks::bound_gap_simulated(&held, &simulated, 2e-5, limit)
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("2500000 samples"), "{e}");
+}
+
 /// The recommended protocol at the length the README and issue #12 use (a 0.2 s fast record
 /// and a 150 s slow one) runs without a setting: the work bound refused it before (1.5e8 stage
 /// steps against 1e8).

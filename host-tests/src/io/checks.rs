@@ -158,7 +158,20 @@ pub fn bound_gap_within(
     period_s: f64,
     limit: u64,
 ) -> anyhow::Result<()> {
-    let samples: usize = records.iter().map(|r| r.1).sum();
+    bound_gap_simulated(records, records, period_s, limit)
+}
+
+/// [`bound_gap_within`] for records whose simulations run on other samples than the fits
+/// hold (a record averaged from a faster one is simulated on its input at its own rate,
+/// [`crate::gap::data::decimated`]): the samples bound on `held`, the work on `simulated`
+/// (the same records, in the same order, as their simulations step through them).
+pub fn bound_gap_simulated(
+    held: &[(String, usize, f64)],
+    simulated: &[(String, usize, f64)],
+    period_s: f64,
+    limit: u64,
+) -> anyhow::Result<()> {
+    let samples: usize = held.iter().map(|r| r.1).sum();
     if samples > GAP_MAX_SAMPLES {
         bail!(
             "the records hold {samples} samples in all, more than the {GAP_MAX_SAMPLES} the model-gap \
@@ -166,7 +179,7 @@ pub fn bound_gap_within(
              less than 1 kHz: cut them shorter"
         );
     }
-    let steps = records
+    let steps = simulated
         .iter()
         .map(|r| {
             // A hold longer than the longest map takes a map per `HELD_MAP_STEPS_MAX` more.
@@ -179,7 +192,7 @@ pub fn bound_gap_within(
             )
         })
         .fold(0u64, u64::saturating_add);
-    let names: Vec<&str> = records.iter().map(|r| r.0.as_str()).collect();
+    let names: Vec<&str> = simulated.iter().map(|r| r.0.as_str()).collect();
     bound_steps(
         &format!(
             "the model-gap workflow on {} ({} stage steps' work per pass at {period_s} s, \

@@ -69,11 +69,25 @@ pub fn run(a: &GapArgs) -> anyhow::Result<()> {
     let data = load_data(&a.data, a.vars.as_deref())?;
     // Records too long for the fits are averaged down, and their notes say so.
     let (data, averaged) = decimate_to_fit(data, checks::GAP_MAX_SAMPLES, GAP_DECIMATED_SAMPLES);
-    let sizes: Vec<(String, usize, f64)> = data
+    let size = |t: &[f64]| t.len().checked_sub(1).map_or(0.0, |last| t[last] - t[0]);
+    let held: Vec<(String, usize, f64)> = data
         .iter()
-        .map(|d| (d.name.clone(), d.len(), d.t_s[d.len() - 1] - d.t_s[0]))
+        .map(|d| (d.name.clone(), d.len(), size(&d.t_s)))
         .collect();
-    checks::bound_gap(&sizes, base.period_s)?;
+    // An averaged record is simulated on its input at its own rate: that is its work.
+    let simulated: Vec<(String, usize, f64)> = data
+        .iter()
+        .map(|d| match &d.fine {
+            Some(f) => (d.name.clone(), f.t_s.len(), size(&f.t_s)),
+            None => (d.name.clone(), d.len(), size(&d.t_s)),
+        })
+        .collect();
+    checks::bound_gap_simulated(
+        &held,
+        &simulated,
+        base.period_s,
+        checks::gap_max_stage_steps(),
+    )?;
     let mut d = diagnose(&base, &data, &Options { progress: true })?;
     d.noise_notes.splice(0..0, averaged);
     // A figure that came out NaN or infinite is an error, before anything is written.
