@@ -51,17 +51,10 @@ enum Calibration {
 }
 
 fn record(base: &ModelFile, cal: Calibration) -> Data {
-    let (mut t, mut d, mut v) = (Vec::new(), Vec::new(), Vec::new());
-    for line in RECORD.lines() {
-        let f: Vec<f64> = line
-            .split(',')
-            .skip(1)
-            .map(|x| x.trim().parse::<f64>().expect("a number"))
-            .collect();
-        t.push(f[0]);
-        d.push(f[1]);
-        v.push(f[2]);
-    }
+    // The published file has no header: its columns by number (time, drive, displacement).
+    let published = Record::parse_named(RECORD, ["2", "4", "3"]).expect("the published record");
+    let (t, v) = (published.t_s, published.u_v);
+    let d = published.y_v.expect("its displacement");
     let u: Vec<f64> = v
         .iter()
         .map(|v| CONTROL_SPAN_V * (v + DRIVE_AMPLITUDE_V) / (2.0 * DRIVE_AMPLITUDE_V))

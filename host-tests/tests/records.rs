@@ -165,6 +165,38 @@ fn semicolon_and_tab_separated_records_read_with_decimal_commas() {
     assert!(e.contains("line 2") && e.contains("fields"), "{e}");
 }
 
+/// A record without a header (a logger's or a published data set's: the first row is data)
+/// names its columns by their 1-based numbers; named columns are refused with the numbers to
+/// use; under a header a number names a column where no column has that name.
+#[test]
+fn a_record_without_a_header_names_its_columns_by_number() {
+    let want = Record::parse("t,u,y\n0,0.5,0.25\n0.001,1.5,-0.75\n0.002,2,1e-3\n").unwrap();
+    // (as the published actuator record: an empty index column, time, output, input)
+    let bare = ",0,0.25,0.5\n,0.001,-0.75,1.5\n,0.002,1e-3,2\n";
+    assert_eq!(Record::parse_named(bare, ["2", "4", "3"]).unwrap(), want);
+    let e = Record::parse(bare).unwrap_err().to_string();
+    assert!(
+        e.contains("line 1") && e.contains("1 to 4") && e.contains("t=1,u=2,y=3"),
+        "{e}"
+    );
+    let e = Record::parse_named(bare, ["2", "5", "3"])
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("`5`"), "{e}");
+    // A comment before the first row is still a comment.
+    let commented = format!("# logged 2026-12-06\n{bare}");
+    assert_eq!(
+        Record::parse_named(&commented, ["2", "4", "3"]).unwrap(),
+        want
+    );
+    let headed = "i,time,out,in\n,0,0.25,0.5\n,0.001,-0.75,1.5\n,0.002,1e-3,2\n";
+    assert_eq!(Record::parse_named(headed, ["2", "4", "3"]).unwrap(), want);
+    assert_eq!(
+        Record::parse_named(headed, ["time", "in", "out"]).unwrap(),
+        want
+    );
+}
+
 #[test]
 fn writer_round_trips_exactly() {
     let t: Vec<f64> = (0..100).map(|i| i as f64 * 1e-3).collect();

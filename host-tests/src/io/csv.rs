@@ -17,6 +17,11 @@
 //! * `y`: sensor monitor volts (required by [`Record::require_y`], optional for inputs);
 //! * `r`: reference volts (optional); any other column is ignored.
 //!
+//! A file whose first row (after comments) is numbers and empty fields has no header: its
+//! columns are named by their 1-based numbers ([`Record::parse_named`] with `["1", "2",
+//! "3"]`, `piezo gap --vars t=1,u=2,y=3`), and names are refused with the numbers to use.
+//! Under a header a number names a column where no column has that name.
+//!
 //! Columns are separated by commas (or, when the header has no comma, by semicolons or tabs,
 //! as spreadsheets in decimal-comma locales export them; a decimal comma is then read as a
 //! point), surrounding spaces and double quotes are trimmed (a separator inside quotes is the
@@ -120,6 +125,18 @@ pub enum RecordError {
     /// No header row.
     #[error("empty record: no header row (expected a line naming the columns, e.g. `t,u,y`)")]
     Empty,
+    /// The first row holds numbers: a record without a header, whose columns were named, not
+    /// numbered.
+    #[error(
+        "line {line}: the first row holds numbers, not column names: a record without a header \
+         names its columns by number, 1 to {columns} (`piezo gap --vars t=1,u=2,y=3`)"
+    )]
+    NoHeader {
+        /// 1-based line of the first row.
+        line: usize,
+        /// Fields in it.
+        columns: usize,
+    },
     /// A required column is missing from the header.
     #[error("line {line}: header has no column `{column}` (found: {found})")]
     MissingColumn {
@@ -234,6 +251,15 @@ pub enum RecordError {
         /// Its length.
         len: usize,
     },
+}
+
+/// A column named by its 1-based number (`3`), as the 0-based index.
+fn column_number(name: &str) -> Option<usize> {
+    name.trim()
+        .parse::<usize>()
+        .ok()
+        .filter(|&i| i >= 1)
+        .map(|i| i - 1)
 }
 
 fn truncate(s: &str) -> String {
@@ -517,33 +543,61 @@ impl Record {
                 sep = separator(s);
             }
             let fields: Vec<&str> = fields_of(s, sep);
-            match &header {
-                None => {
-                    let names: Vec<String> = fields
+            if header.is_none() {
+                // A first row of numbers (and empty fields) is data: the record has no header,
+                // and its columns are named by their 1-based numbers (`--vars t=1,u=2,y=3`).
+                let headerless = fields.iter().any(|f| number_of(f, sep).is_some())
+                    && fields
+                        .iter()
+                        .all(|f| f.trim().is_empty() || number_of(f, sep).is_some());
+                let names: Vec<String> = if headerless {
+                    (1..=fields.len()).map(|i| i.to_string()).collect()
+                } else {
+                    fields
                         .iter()
                         .map(|f| f.trim_matches('"').to_string())
-                        .collect();
-                    for (a, name) in names.iter().enumerate() {
-                        if names[..a].contains(name) {
-                            return Err(RecordError::DuplicateColumn {
-                                line,
-                                column: name.clone(),
-                            });
-                        }
-                    }
-                    let wanted = names_wanted;
-                    let find = |c: &str| names.iter().position(|n| n == c);
-                    let missing = |column: &str| RecordError::MissingColumn {
+                        .collect()
+                };
+                if headerless && column_number(names_wanted[0]).is_none() {
+                    return Err(RecordError::NoHeader {
                         line,
-                        column: column.to_string(),
-                        found: truncate(&names.join(",")),
-                    };
-                    it = find(wanted[0]).ok_or_else(|| missing(wanted[0]))?;
-                    iu = find(wanted[1]).ok_or_else(|| missing(wanted[1]))?;
-                    iy = find(wanted[2]);
-                    ir = find("r");
-                    header = Some((line, names));
+                        columns: fields.len(),
+                    });
                 }
+                for (a, name) in names.iter().enumerate() {
+                    if names[..a].contains(name) {
+                        return Err(RecordError::DuplicateColumn {
+                            line,
+                            column: name.clone(),
+                        });
+                    }
+                }
+                let wanted = names_wanted;
+                // A column by its name, or by its 1-based number where no column has that name.
+                let find = |c: &str| {
+                    names
+                        .iter()
+                        .position(|n| n == c)
+                        .or_else(|| column_number(c).filter(|&i| i < names.len()))
+                };
+                let missing = |column: &str| RecordError::MissingColumn {
+                    line,
+                    column: column.to_string(),
+                    found: truncate(&names.join(",")),
+                };
+                it = find(wanted[0]).ok_or_else(|| missing(wanted[0]))?;
+                iu = find(wanted[1]).ok_or_else(|| missing(wanted[1]))?;
+                iy = find(wanted[2]);
+                ir = if headerless { None } else { find("r") };
+                header = Some((line, names));
+                if !headerless {
+                    continue;
+                }
+                // (no units row under a row of numbers)
+                units_skipped = true;
+            }
+            match &header {
+                None => {}
                 Some((_, names)) => {
                     // A units row under the header (`s,V,V`, as loggers and spreadsheets
                     // write one): the first row, where none of the columns read is a number.

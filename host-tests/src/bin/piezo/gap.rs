@@ -50,7 +50,8 @@ pub struct GapArgs {
     #[arg(long)]
     pub json: bool,
     /// Names of the time, input and output columns (CSV header) or variables (.mat):
-    /// t=NAME,u=NAME,y=NAME [default: t=t,u=u,y=y].
+    /// t=NAME,u=NAME,y=NAME [default: t=t,u=u,y=y]; a CSV without a header names them by
+    /// their 1-based numbers (t=1,u=2,y=3).
     #[arg(long)]
     pub vars: Option<String>,
 }
