@@ -1045,10 +1045,12 @@ pub fn load_data(paths: &[std::path::PathBuf], vars: Option<&str>) -> anyhow::Re
 /// jump (measured on 45 s of `thesis-full` at 50 kHz, random levels, averaged by 3 and
 /// diagnosed from `thesis-linear`: with the mean 16.3 mV was left, with the middle sample
 /// 6.15 mV, against 6.88 mV on the same protocol sampled at the averaged rate), a held input
-/// keeps its level exactly, and a smooth one reads its value at the block's middle. White noise on the output is divided by `sqrt(factor)`; a block of equal
-/// outputs keeps their value exactly.
+/// keeps its level exactly, and a smooth one reads its value at the block's middle. White
+/// noise on the output is divided by `sqrt(factor)`; a block of equal outputs keeps their
+/// value exactly. `factor` is held to 1 ..= the record's length over [`MIN_SAMPLES`], so
+/// the averaged record is one the workflow takes.
 pub fn decimated(d: &Data, factor: usize) -> Data {
-    let factor = factor.max(1);
+    let factor = factor.clamp(1, (d.len() / MIN_SAMPLES).max(1));
     let mean = |v: &[f64]| -> f64 {
         if v.iter().all(|&x| x == v[0]) {
             v[0]
@@ -1657,5 +1659,7 @@ mod tests {
         assert_eq!(floor[0].len(), 400);
         assert!(1.0 / floor[0].period_s() >= 1000.0 * (1.0 - GAP_RATE_TOLERANCE));
         assert_eq!(notes.len(), 1);
+        // A factor beyond what the record holds is held to one the workflow takes.
+        assert_eq!(decimated(&fast, 10_000).len(), MIN_SAMPLES);
     }
 }

@@ -162,9 +162,9 @@ pub fn bound_gap_within(
 }
 
 /// [`bound_gap_within`] for records whose simulations run on other samples than the fits
-/// hold (a record averaged from a faster one is simulated on its input at its own rate,
-/// [`crate::gap::data::decimated`]): the samples bound on `held`, the work on `simulated`
-/// (the same records, in the same order, as their simulations step through them).
+/// hold (the model-gap workflow simulates a record it averaged from a faster one on its
+/// input at its own rate): the samples bound on `held`, the work on `simulated` (the same
+/// records, in the same order, as their simulations step through them).
 pub fn bound_gap_simulated(
     held: &[(String, usize, f64)],
     simulated: &[(String, usize, f64)],
