@@ -195,6 +195,9 @@ fn a_record_without_a_header_names_its_columns_by_number() {
         Record::parse_named(headed, ["time", "in", "out"]).unwrap(),
         want
     );
+    // A data frame's unnamed columns (`,0,1,2`) are a header of those labels.
+    let frame = ",0,1,2\n0,0,0.5,0.25\n1,0.001,1.5,-0.75\n2,0.002,2,1e-3\n";
+    assert_eq!(Record::parse_named(frame, ["0", "1", "2"]).unwrap(), want);
 }
 
 #[test]

@@ -20,7 +20,9 @@
 //! A file whose first row (after comments) is numbers and empty fields has no header: its
 //! columns are named by their 1-based numbers ([`Record::parse_named`] with `["1", "2",
 //! "3"]`, `piezo gap --vars t=1,u=2,y=3`), and names are refused with the numbers to use.
-//! Under a header a number names a column where no column has that name.
+//! Under a header a number names a column where no column has that name; a header of an
+//! empty name and the integers from 0 or 1 in order (`,0,1,2`, a data frame's unnamed
+//! columns) is a header of those labels.
 //!
 //! Columns are separated by commas (or, when the header has no comma, by semicolons or tabs,
 //! as spreadsheets in decimal-comma locales export them; a decimal comma is then read as a
@@ -251,6 +253,27 @@ pub enum RecordError {
         /// Its length.
         len: usize,
     },
+}
+
+/// A header of column labels that are numbers: an empty index column's name, then the
+/// integers from 0 or 1 in order (`,0,1,2` as a data frame whose columns were never named
+/// writes it), which no first row of samples reads.
+fn numbered_labels(fields: &[&str]) -> bool {
+    let labels: Vec<&str> = fields.iter().map(|f| f.trim()).collect();
+    let Some((first, rest)) = labels.split_first() else {
+        return false;
+    };
+    let from = match rest.first() {
+        Some(&"0") => 0,
+        Some(&"1") => 1,
+        _ => return false,
+    };
+    first.is_empty()
+        && rest.len() >= 2
+        && rest
+            .iter()
+            .enumerate()
+            .all(|(i, l)| l.parse::<usize>() == Ok(from + i))
 }
 
 /// A column named by its 1-based number (`3`), as the 0-based index.
@@ -549,7 +572,8 @@ impl Record {
                 let headerless = fields.iter().any(|f| number_of(f, sep).is_some())
                     && fields
                         .iter()
-                        .all(|f| f.trim().is_empty() || number_of(f, sep).is_some());
+                        .all(|f| f.trim().is_empty() || number_of(f, sep).is_some())
+                    && !numbered_labels(&fields);
                 let names: Vec<String> = if headerless {
                     (1..=fields.len()).map(|i| i.to_string()).collect()
                 } else {
