@@ -193,6 +193,9 @@ fn gap_on_samples_far_apart_is_refused_up_front() {
 
 #[test]
 fn gap_refuses_too_many_samples_with_their_count() {
+    if std::env::var_os(checks::MAX_SAMPLES_ENV).is_some() {
+        return; // the bound is the caller's
+    }
     let big = vec![("big.csv".to_string(), 10_000_000, 200.0)];
     let e = checks::bound_gap(&big, 2e-5).unwrap_err().to_string();
     println!("{e}");
@@ -201,14 +204,87 @@ fn gap_refuses_too_many_samples_with_their_count() {
     checks::bound_gap(&ok, 2e-5).expect("a small record runs");
 }
 
+/// `piezo gap` on records beyond its samples bound (set low here with
+/// `PIEZO_GAP_MAX_SAMPLES`, as a lab's minute at 50 kHz is beyond the default 2 M): the
+/// record is averaged to half the bound, the JSON's `noise_notes` says how, and the loop of
+/// the thesis stage is named; where even 1 kHz would hold too many samples the run is refused
+/// (exit 2) with the advice to cut the records and the setting named.
+#[test]
+fn gap_averages_records_beyond_its_samples_bound() {
+    let d = dir("averaged");
+    let rec = d.join("sine.csv");
+    let synth = piezo(
+        &[
+            "synth",
+            "--model",
+            "thesis-full",
+            "--protocol",
+            "sine",
+            "--seconds",
+            "4",
+            "--rate",
+            "20000",
+            "--amplitude",
+            "8",
+            "--offset",
+            "1",
+            "--output",
+            s(&rec),
+        ],
+        QUICK,
+    );
+    assert_eq!(synth.code, Some(0), "{}", synth.stderr);
+    // 80 000 samples against a bound of 50 000: averaged by 4 to 20 000 (half the bound is
+    // 25 000).
+    let args = [
+        "gap",
+        "--model",
+        "thesis-linear",
+        "--data",
+        s(&rec),
+        "--json",
+    ];
+    let r = piezo_env(
+        &args,
+        &[(checks::MAX_SAMPLES_ENV, "50000")],
+        Duration::from_secs(120),
+    );
+    assert_eq!(r.code, Some(0), "{}{}", r.stdout, r.stderr);
+    let v: serde_json::Value = serde_json::from_str(&r.stdout).expect("one JSON object");
+    let notes = v["noise_notes"].as_array().expect("noise_notes");
+    let first = notes.first().and_then(|n| n.as_str()).unwrap_or_default();
+    assert!(
+        first.starts_with("sine.csv: 80000 samples at 20000 Hz averaged in blocks of 4 to 20000"),
+        "{notes:?}"
+    );
+    let named: Vec<&str> = v["named"]
+        .as_array()
+        .expect("named")
+        .iter()
+        .filter_map(|n| n.as_str())
+        .collect();
+    assert!(named.contains(&"hysteresis"), "{named:?}");
+    // 4 s cannot be held in 1 000 samples at 1 kHz or faster: refused.
+    let r = piezo_env(&args, &[(checks::MAX_SAMPLES_ENV, "1000")], QUICK);
+    assert_eq!(r.code, Some(2), "{}{}", r.stdout, r.stderr);
+    assert!(
+        r.stderr.contains("cut them shorter") && r.stderr.contains(checks::MAX_SAMPLES_ENV),
+        "{}",
+        r.stderr
+    );
+    let _ = std::fs::remove_dir_all(&d);
+}
+
 /// A record averaged from a faster one (`piezo gap` averages records beyond the samples
 /// bound) is bounded by what its fits hold and by the work of its simulations, which run at
 /// its own rate: 150 s at 50 kHz held as 1 M samples runs (7.5e6 steps a pass), 600 s at
 /// 50 kHz held as 1 M is refused by its work, with the setting named.
 #[test]
 fn gap_bounds_an_averaged_record_by_its_simulations() {
-    if std::env::var_os(checks::MAX_STEPS_ENV).is_some() {
-        return; // the bound is the caller's
+    if std::env::var_os(checks::MAX_STEPS_ENV).is_some()
+        || std::env::var_os(checks::MAX_SAMPLES_ENV).is_some()
+    {
+        return; // the bounds are the caller's
     }
     let limit = checks::gap_max_stage_steps();
     let held = vec![("slow.csv".to_string(), 1_000_000, 150.0)];

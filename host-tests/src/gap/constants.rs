@@ -136,13 +136,6 @@ pub const GAP_MIN_RATE_HZ: f64 = 1000.0;
 /// The share below [`GAP_MIN_RATE_HZ`] a record's rate may read (our assumption: time stamps
 /// rounded to a few digits make a 1 kHz record read a little under 1000 Hz).
 pub const GAP_RATE_TOLERANCE: f64 = 0.01;
-/// Samples over all records that `piezo gap` averages longer records down to, where they hold
-/// more than [`crate::io::checks::GAP_MAX_SAMPLES`] ([`super::data::decimate_to_fit`]): the
-/// workflow's fits keep several simulations of every record (measured in session 41: 1 M
-/// samples, 33 s and 1.26 GB on 2 cores), so a 150 s record at the DS1103's 50 kHz is read at
-/// 6.25 kHz instead of refused (our assumption: half the bound, so that the averaged records
-/// cost what the bench's largest do, not the most the machine can hold).
-pub const GAP_DECIMATED_SAMPLES: usize = 1_000_000;
 /// Fewest samples a record must have to show anything.
 pub const MIN_SAMPLES: usize = 200;
 /// Records at or above this rate are "fast" (edges resolved), volts... Hz.

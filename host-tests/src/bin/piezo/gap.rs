@@ -18,15 +18,14 @@
 //! splits' diagnoses ran: `{"split", "named", "final_noise_var"}` of the one not kept), a
 //! progress bar to stderr.
 //!
-//! Records that hold more than [`checks::GAP_MAX_SAMPLES`] samples in all are averaged in
-//! blocks down to [`GAP_DECIMATED_SAMPLES`] ([`decimate_to_fit`]; a 150 s record at the
-//! DS1103's 50 kHz is read at 6.25 kHz), each with a `noise_notes` entry that says so; only
-//! records that cannot be averaged that far without going below 1 kHz are refused.
+//! Records that hold more than [`checks::gap_max_samples`] samples in all (2 M, or
+//! `PIEZO_GAP_MAX_SAMPLES`) are averaged in blocks down to half that
+//! ([`checks::gap_averaged_samples`], [`decimate_to_fit`]; a 150 s record at the DS1103's
+//! 50 kHz is read at 6.25 kHz), each with a `noise_notes` entry that says so; only records
+//! that cannot be averaged that far without going below 1 kHz are refused.
 
 use clap::Args;
-use host_tests::gap::{
-    GAP_DECIMATED_SAMPLES, Options, decimate_to_fit, diagnose, load_data, report,
-};
+use host_tests::gap::{Options, decimate_to_fit, diagnose, load_data, report};
 use host_tests::io::checks;
 use host_tests::io::model_file::ModelFile;
 use std::path::{Path, PathBuf};
@@ -69,7 +68,11 @@ pub fn run(a: &GapArgs) -> anyhow::Result<()> {
     let base = ModelFile::load(&a.model)?;
     let data = load_data(&a.data, a.vars.as_deref())?;
     // Records too long for the fits are averaged down, and their notes say so.
-    let (data, averaged) = decimate_to_fit(data, checks::GAP_MAX_SAMPLES, GAP_DECIMATED_SAMPLES);
+    let (data, averaged) = decimate_to_fit(
+        data,
+        checks::gap_max_samples(),
+        checks::gap_averaged_samples(),
+    );
     let size = |t: &[f64]| t.len().checked_sub(1).map_or(0.0, |last| t[last] - t[0]);
     let held: Vec<(String, usize, f64)> = data
         .iter()
