@@ -195,9 +195,21 @@ fn a_record_without_a_header_names_its_columns_by_number() {
         Record::parse_named(headed, ["time", "in", "out"]).unwrap(),
         want
     );
-    // A data frame's unnamed columns (`,0,1,2`) are a header of those labels.
+    // A data frame's unnamed columns (`,0,1,2`, or `0,1,2` without its index) are a header of
+    // those labels, and a number under it is a label, never a position.
     let frame = ",0,1,2\n0,0,0.5,0.25\n1,0.001,1.5,-0.75\n2,0.002,2,1e-3\n";
     assert_eq!(Record::parse_named(frame, ["0", "1", "2"]).unwrap(), want);
+    let labelled = Record::parse_named(frame, ["0", "1", "3"]).unwrap();
+    assert_eq!(labelled.u_v, want.u_v);
+    assert!(
+        labelled.y_v.is_none(),
+        "`3` is no label, and not a position"
+    );
+    let bare_frame = "0,1,2\n0,0.5,0.25\n0.001,1.5,-0.75\n0.002,2,1e-3\n";
+    assert_eq!(
+        Record::parse_named(bare_frame, ["0", "1", "2"]).unwrap(),
+        want
+    );
 }
 
 #[test]

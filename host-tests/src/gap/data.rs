@@ -20,7 +20,7 @@ use super::constants::{
 };
 use crate::io::csv::Record;
 use crate::io::model_file::ModelFile;
-use crate::sim::open_loop::{simulate_after, simulate_after_while};
+use crate::sim::open_loop::simulate_after_while;
 use crate::util::median;
 use anyhow::{Context, bail, ensure};
 use std::collections::VecDeque;
@@ -894,17 +894,25 @@ fn sim_while(
         // An averaged record: the stage on the input at its own rate, its output averaged
         // over each block as the record's was (the early stop asked per block mean).
         Some(f) => {
-            let fine = simulate_after(&stage, m.period_s, &history, &f.t_s, &f.u_v);
             let mut go_on = go_on;
-            let mut y = Vec::with_capacity(d.len());
-            for (i, block) in fine.chunks_exact(f.factor).take(d.len()).enumerate() {
-                let v = block.iter().sum::<f64>() / f.factor as f64;
-                if !go_on(i, v) {
-                    return Ok(None);
-                }
-                y.push(v);
-            }
-            Some(y)
+            let (n, factor) = (d.len(), f.factor);
+            let mut y = Vec::with_capacity(n);
+            let (mut sum, mut in_block) = (0.0, 0usize);
+            let done =
+                simulate_after_while(&stage, m.period_s, &history, &f.t_s, &f.u_v, |_, v| {
+                    sum += v;
+                    in_block += 1;
+                    if in_block == factor && y.len() < n {
+                        let mean = sum / factor as f64;
+                        (sum, in_block) = (0.0, 0);
+                        if !go_on(y.len(), mean) {
+                            return false;
+                        }
+                        y.push(mean);
+                    }
+                    true
+                });
+            done.map(|_| y)
         }
         None => simulate_after_while(&stage, m.period_s, &history, &d.t_s, &d.u_v, go_on),
     };
@@ -1100,28 +1108,38 @@ fn median_sample(v: &[f64]) -> f64 {
 /// The longest record (in samples, as averaged so far) is averaged one factor further at a
 /// time, so that a short fast record beside a long slow one keeps its rate; no record is
 /// averaged below [`GAP_MIN_RATE_HZ`] or [`MIN_SAMPLES`]. Where that cannot reach `target`
-/// the records are averaged as far as it allows and the caller's bound refuses them, saying
-/// to cut them shorter.
+/// (a long record already near 1 kHz), the records are averaged only until they hold `bound`,
+/// and where even that cannot be reached as far as it allows: the caller's bound then
+/// refuses them, saying to cut them shorter.
 pub fn decimate_to_fit(data: Vec<Data>, bound: usize, target: usize) -> (Vec<Data>, Vec<String>) {
     let total: usize = data.iter().map(Data::len).sum();
     if total <= bound {
         return (data, Vec::new());
     }
+    let can_take = |i: usize, f: usize| {
+        data[i].len() / f >= MIN_SAMPLES
+            && 1.0 / (data[i].period_s() * f as f64) >= (1.0 - GAP_RATE_TOLERANCE) * GAP_MIN_RATE_HZ
+    };
+    // The fewest samples the records can be averaged to; where that is above `target`, the
+    // records are averaged only as far as `bound` asks (a record already at 1 kHz leaves the
+    // others no reason to go there too).
+    let fewest: usize = (0..data.len())
+        .map(|i| {
+            let f_max = (1..=data[i].len()).take_while(|&f| can_take(i, f)).last();
+            data[i].len() / f_max.unwrap_or(1)
+        })
+        .sum();
+    let goal = if fewest <= target { target } else { bound };
     let mut factors = vec![1usize; data.len()];
     let samples = |i: usize, f: &[usize]| data[i].len() / f[i];
     loop {
         let now: usize = (0..data.len()).map(|i| samples(i, &factors)).sum();
-        if now <= target {
+        if now <= goal {
             break;
         }
         // The longest record that can still be averaged one factor further.
         let next = (0..data.len())
-            .filter(|&i| {
-                let f = factors[i] + 1;
-                data[i].len() / f >= MIN_SAMPLES
-                    && 1.0 / (data[i].period_s() * f as f64)
-                        >= (1.0 - GAP_RATE_TOLERANCE) * GAP_MIN_RATE_HZ
-            })
+            .filter(|&i| can_take(i, factors[i] + 1))
             .max_by_key(|&i| samples(i, &factors));
         let Some(i) = next else { break };
         factors[i] += 1;
@@ -1653,13 +1671,24 @@ mod tests {
             "{}",
             notes[0]
         );
-        // 20 000 samples at 50 kHz cannot go below 400 at 1 kHz: the records stay over a
-        // target of 100, and the caller's bound refuses them.
-        let (floor, notes) = decimate_to_fit(vec![long], 1_000, 100);
+        // 20 000 samples at 50 kHz cannot go below 400 at 1 kHz: under a target of 100 they
+        // are averaged only as far as a bound of 1 000 asks (by 20), and under a bound of 300
+        // as far as they go, which the caller's bound then refuses.
+        let (fit, _) = decimate_to_fit(vec![long.clone()], 1_000, 100);
+        assert_eq!(fit[0].len(), 1_000);
+        let (floor, notes) = decimate_to_fit(vec![long.clone()], 300, 150);
         assert_eq!(floor[0].len(), 400);
         assert!(1.0 / floor[0].period_s() >= 1000.0 * (1.0 - GAP_RATE_TOLERANCE));
         assert_eq!(notes.len(), 1);
         // A factor beyond what the record holds is held to one the workflow takes.
         assert_eq!(decimated(&fast, 10_000).len(), MIN_SAMPLES);
+        // A record at 1 kHz cannot be averaged: where it alone keeps the records above the
+        // target, the others go only as far as the bound asks (20 000 at 50 kHz by 2, not
+        // down to 1 kHz).
+        let slow = stage_record(&linear, 1_000.0, 16.0);
+        let (fit, notes) = decimate_to_fit(vec![slow.clone(), long.clone()], 30_000, 15_000);
+        assert_eq!(fit[0].len(), slow.len());
+        assert_eq!(fit[1].len(), 10_000);
+        assert_eq!(notes.len(), 1);
     }
 }

@@ -112,13 +112,22 @@ pub fn measured_input_noise(
         return None;
     }
     let input_v = u_floor.sigma_v;
+    // The simulations below run on inputs at the record's own rate; an averaged record's
+    // `model_y` ran on its input at the faster rate (`Data::fine`), so for it they are
+    // compared with the model's output from its input as recorded at this rate instead (the
+    // two simulations' difference is not the input's noise).
+    let reference = if d.fine.is_some() {
+        sim(model, &with_input(d.u_v.clone())).ok()?
+    } else {
+        model_y.to_vec()
+    };
     // The noise carried by the model: its output from the input with a drawn white noise of
     // the input's size added, less its output from the input as recorded.
     let normal = Normal::new(0.0, input_v).ok()?;
     let mut rng = rand::rngs::StdRng::seed_from_u64(DRAW_SEED);
     let drawn = d.u_v.iter().map(|u| u + normal.sample(&mut rng)).collect();
     let y2 = sim(model, &with_input(drawn)).ok()?;
-    let carried_v = mse(&y2, model_y).sqrt();
+    let carried_v = mse(&y2, &reference).sqrt();
     if !carried_v.is_finite() || carried_v < INPUT_NOISE_MIN_SHARE * y_floor.sigma_v {
         return None;
     }
@@ -127,8 +136,18 @@ pub fn measured_input_noise(
     let own = own_noise(&d.u_v, input_v);
     let quiet: Vec<f64> = d.u_v.iter().zip(&own).map(|(u, n)| u - n).collect();
     let y3 = sim(model, &with_input(quiet)).ok()?;
-    let response: Vec<f64> = model_y.iter().zip(&y3).map(|(a, b)| a - b).collect();
-    let rest: Vec<f64> = d.y_v.iter().zip(&y3).map(|(a, b)| a - b).collect();
+    let response: Vec<f64> = reference.iter().zip(&y3).map(|(a, b)| a - b).collect();
+    let rest: Vec<f64> = if d.fine.is_some() {
+        // (the output less the model's, plus the response at this rate)
+        d.y_v
+            .iter()
+            .zip(model_y)
+            .zip(&response)
+            .map(|((y, m), r)| y - m + r)
+            .collect()
+    } else {
+        d.y_v.iter().zip(&y3).map(|(a, b)| a - b).collect()
+    };
     if !rest.iter().chain(&response).all(|v| v.is_finite()) {
         return None;
     }

@@ -20,9 +20,9 @@
 //! A file whose first row (after comments) is numbers and empty fields has no header: its
 //! columns are named by their 1-based numbers ([`Record::parse_named`] with `["1", "2",
 //! "3"]`, `piezo gap --vars t=1,u=2,y=3`), and names are refused with the numbers to use.
-//! Under a header a number names a column where no column has that name; a header of an
-//! empty name and the integers from 0 or 1 in order (`,0,1,2`, a data frame's unnamed
-//! columns) is a header of those labels.
+//! Under a header a number names a column where no column has that name; a header of the
+//! integers from 0 in order, after an empty name or not (`,0,1,2` or `0,1,2`, a data frame's
+//! unnamed columns), is a header of those labels, and a number under it is a label.
 //!
 //! Columns are separated by commas (or, when the header has no comma, by semicolons or tabs,
 //! as spreadsheets in decimal-comma locales export them; a decimal comma is then read as a
@@ -255,25 +255,22 @@ pub enum RecordError {
     },
 }
 
-/// A header of column labels that are numbers: an empty index column's name, then the
-/// integers from 0 or 1 in order (`,0,1,2` as a data frame whose columns were never named
-/// writes it), which no first row of samples reads.
+/// A header of column labels that are numbers, as a data frame whose columns were never
+/// named writes it: the integers from 0 in order (`0,1,2`), or an empty index column's name
+/// and then the integers from 0 or 1 (`,0,1,2`). Read as a header, as such files were before
+/// records without one were (a first row of samples that reads so is taken for labels).
 fn numbered_labels(fields: &[&str]) -> bool {
     let labels: Vec<&str> = fields.iter().map(|f| f.trim()).collect();
-    let Some((first, rest)) = labels.split_first() else {
-        return false;
+    let (rest, starts): (&[&str], &[usize]) = match labels.split_first() {
+        Some((&"", rest)) => (rest, &[0, 1]),
+        _ => (&labels, &[0]),
     };
-    let from = match rest.first() {
-        Some(&"0") => 0,
-        Some(&"1") => 1,
-        _ => return false,
-    };
-    first.is_empty()
-        && rest.len() >= 2
-        && rest
-            .iter()
-            .enumerate()
-            .all(|(i, l)| l.parse::<usize>() == Ok(from + i))
+    rest.len() >= 2
+        && starts.iter().any(|&from| {
+            rest.iter()
+                .enumerate()
+                .all(|(i, l)| l.parse::<usize>() == Ok(from + i))
+        })
 }
 
 /// A column named by its 1-based number (`3`), as the 0-based index.
@@ -569,11 +566,12 @@ impl Record {
             if header.is_none() {
                 // A first row of numbers (and empty fields) is data: the record has no header,
                 // and its columns are named by their 1-based numbers (`--vars t=1,u=2,y=3`).
+                let labels = numbered_labels(&fields);
                 let headerless = fields.iter().any(|f| number_of(f, sep).is_some())
                     && fields
                         .iter()
                         .all(|f| f.trim().is_empty() || number_of(f, sep).is_some())
-                    && !numbered_labels(&fields);
+                    && !labels;
                 let names: Vec<String> = if headerless {
                     (1..=fields.len()).map(|i| i.to_string()).collect()
                 } else {
@@ -597,12 +595,13 @@ impl Record {
                     }
                 }
                 let wanted = names_wanted;
-                // A column by its name, or by its 1-based number where no column has that name.
+                // A column by its name, or by its 1-based number where no column has that name
+                // (not under numbered labels: a number there is a label, or missing).
                 let find = |c: &str| {
                     names
                         .iter()
                         .position(|n| n == c)
-                        .or_else(|| column_number(c).filter(|&i| i < names.len()))
+                        .or_else(|| column_number(c).filter(|&i| i < names.len() && !labels))
                 };
                 let missing = |column: &str| RecordError::MissingColumn {
                     line,
