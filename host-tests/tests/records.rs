@@ -205,6 +205,15 @@ fn a_record_without_a_header_names_its_columns_by_number() {
         labelled.y_v.is_none(),
         "`3` is no label, and not a position"
     );
+    // Without a header, from a decimal-comma locale: semicolons or tabs, decimal commas.
+    for sep in [";", "\t"] {
+        let text = format!("0{sep}0,5{sep}0,25\n0,001{sep}1,5{sep}-0,75\n0,002{sep}2{sep}1e-3\n");
+        assert_eq!(
+            Record::parse_named(&text, ["1", "2", "3"]).unwrap(),
+            want,
+            "{sep:?}"
+        );
+    }
     let bare_frame = "0,1,2\n0,0.5,0.25\n0.001,1.5,-0.75\n0.002,2,1e-3\n";
     assert_eq!(
         Record::parse_named(bare_frame, ["0", "1", "2"]).unwrap(),

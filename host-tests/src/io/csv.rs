@@ -561,6 +561,20 @@ impl Record {
             }
             if header.is_none() {
                 sep = separator(s);
+                // A first row of numbers with decimal commas under semicolons or tabs (a
+                // record without a header from a decimal-comma locale) holds commas too: its
+                // separator is the one that splits it into numbers.
+                let numbers = |sep: char| {
+                    fields_of(s, sep)
+                        .iter()
+                        .all(|f| f.trim().is_empty() || number_of(f, sep).is_some())
+                };
+                if sep == ',' && !numbers(',') {
+                    sep = [';', '\t']
+                        .into_iter()
+                        .find(|&alt| s.contains(alt) && numbers(alt))
+                        .unwrap_or(',');
+                }
             }
             let fields: Vec<&str> = fields_of(s, sep);
             if header.is_none() {
