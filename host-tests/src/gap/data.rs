@@ -1054,18 +1054,12 @@ pub fn load_data(paths: &[std::path::PathBuf], vars: Option<&str>) -> anyhow::Re
 /// diagnosed from `thesis-linear`: with the mean 16.3 mV was left, with the middle sample
 /// 6.15 mV, against 6.88 mV on the same protocol sampled at the averaged rate), a held input
 /// keeps its level exactly, and a smooth one reads its value at the block's middle. White
-/// noise on the output is divided by `sqrt(factor)`; a block of equal outputs keeps their
-/// value exactly. `factor` is held to 1 ..= the record's length over [`MIN_SAMPLES`], so
+/// noise on the output is divided by `sqrt(factor)`. `factor` is held to 1 ..= the record's length over [`MIN_SAMPLES`], so
 /// the averaged record is one the workflow takes.
 pub fn decimated(d: &Data, factor: usize) -> Data {
     let factor = factor.clamp(1, (d.len() / MIN_SAMPLES).max(1));
-    let mean = |v: &[f64]| -> f64 {
-        if v.iter().all(|&x| x == v[0]) {
-            v[0]
-        } else {
-            v.iter().sum::<f64>() / v.len() as f64
-        }
-    };
+    // (summed in order, as `sim` sums an averaged record's blocks)
+    let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len() as f64;
     let n = d.len();
     let blocks = n / factor;
     let mut t_s = Vec::with_capacity(blocks);

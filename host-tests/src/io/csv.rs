@@ -255,6 +255,13 @@ pub enum RecordError {
     },
 }
 
+/// Is every field of a row a number under `sep`, or empty (an index column without a name)?
+fn numeric_row(fields: &[&str], sep: char) -> bool {
+    fields
+        .iter()
+        .all(|f| f.trim().is_empty() || number_of(f, sep).is_some())
+}
+
 /// A header of column labels that are numbers, as a data frame whose columns were never
 /// named writes it: the integers from 0 in order (`0,1,2`), or an empty index column's name
 /// and then the integers from 0 or 1 (`,0,1,2`). Read as a header, as such files were before
@@ -564,15 +571,10 @@ impl Record {
                 // A first row of numbers with decimal commas under semicolons or tabs (a
                 // record without a header from a decimal-comma locale) holds commas too: its
                 // separator is the one that splits it into numbers.
-                let numbers = |sep: char| {
-                    fields_of(s, sep)
-                        .iter()
-                        .all(|f| f.trim().is_empty() || number_of(f, sep).is_some())
-                };
-                if sep == ',' && !numbers(',') {
+                if sep == ',' && !numeric_row(&fields_of(s, ','), ',') {
                     sep = [';', '\t']
                         .into_iter()
-                        .find(|&alt| s.contains(alt) && numbers(alt))
+                        .find(|&alt| s.contains(alt) && numeric_row(&fields_of(s, alt), alt))
                         .unwrap_or(',');
                 }
             }
@@ -582,9 +584,7 @@ impl Record {
                 // and its columns are named by their 1-based numbers (`--vars t=1,u=2,y=3`).
                 let labels = numbered_labels(&fields);
                 let headerless = fields.iter().any(|f| number_of(f, sep).is_some())
-                    && fields
-                        .iter()
-                        .all(|f| f.trim().is_empty() || number_of(f, sep).is_some())
+                    && numeric_row(&fields, sep)
                     && !labels;
                 let names: Vec<String> = if headerless {
                     (1..=fields.len()).map(|i| i.to_string()).collect()
