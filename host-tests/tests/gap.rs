@@ -936,6 +936,82 @@ fn sensor_gain_and_offset_are_named() {
     }
 }
 
+/// A base model with slow effects of its own (the lab's `thesis-full`, or a model an earlier
+/// diagnosis wrote) is held as it is given: a step names what the records add to it, and a
+/// refit of the base's table, drift or K'(u) that no step names does not take that work
+/// (GAP.md, session 55). Before, every candidate refitted the base's slow effects beside
+/// it: a 20 mV sensor offset went into a refitted table (fitted at 164 mV, then taken out
+/// as a level the records do not show) and nothing was named, at 1.59x the floor; a K'(u)
+/// half the thesis' was taken up by such refits, nothing named, at 1.50x and 1.29x. The
+/// truths are the thesis stage with one thing changed; the records a 1 Hz sine over 0-9 V
+/// (10 s at 5 kHz) and a 0.5-50 Hz chirp over 1-9 V (8 s at 20 kHz), the thesis' noise.
+#[test]
+fn a_base_with_slow_effects_of_its_own_is_held_as_given() {
+    let base = ModelFile::built_in("thesis-full").unwrap();
+    let record = |truth: &ModelFile, seed: u64, (t, u): (Vec<f64>, Vec<f64>)| {
+        let mut m = truth.clone();
+        m.converters.seed = seed;
+        let y = simulate(&m.build_stage().unwrap(), m.period_s, &t, &u);
+        vec![Data::from_record("record.csv", Record::new(t, u, Some(y), None).unwrap()).unwrap()]
+    };
+    let sine = || raised_cosine(5_000.0, 10.0, 1.0, 4.5, 4.5);
+    let chirp = || {
+        let (rate_hz, seconds, f0, f1) = (20_000.0, 8.0, 0.5, 50.0);
+        let t: Vec<f64> = (0..(seconds * rate_hz) as usize)
+            .map(|i| i as f64 / rate_hz)
+            .collect();
+        let u = t
+            .iter()
+            .map(|&x| {
+                let phase = f0 * x + 0.5 * (f1 - f0) * x * x / seconds;
+                5.0 - 4.0 * (2.0 * std::f64::consts::PI * phase).cos()
+            })
+            .collect();
+        (t, u)
+    };
+    let diagnosed = |label: &str, data: &[Data]| {
+        let d = diagnose(&base, data, &Options::default()).unwrap();
+        println!("{label}\n{}", d.table());
+        let mut named: Vec<String> = d.named.clone();
+        named.sort();
+        // (the thesis' noise is white: a model that holds what the records add ends at the
+        // floor; 1.2x leaves room for the floor's estimate, not for a misfit)
+        let ratio = d.final_rms_v / d.noise_floor_v;
+        assert!(ratio <= 1.2, "{label}: final {ratio:.2}x the floor");
+        (named, d)
+    };
+    // The stage as the base gives it: nothing to name.
+    let (named, _) = diagnosed("the base's own stage", &record(&base, 71, sine()));
+    assert!(named.is_empty(), "the base's own stage: named {named:?}");
+    // A sensor offset: named, at its value (noise of 2.5 mV over 50 000 samples; the
+    // tolerance covers the table's f32 grid and the ADC's codes).
+    let mut truth = base.clone();
+    truth.offset = Some(host_tests::io::model_file::OffsetSection { offset_v: 0.02 });
+    let (named, d) = diagnosed("a 20 mV offset", &record(&truth, 72, sine()));
+    assert_eq!(named, ["offset"], "a 20 mV offset");
+    let offset_v = d.model.offset.as_ref().map_or(0.0, |o| o.offset_v);
+    assert!(
+        (offset_v - 0.02).abs() < 1e-3,
+        "offset {:.2} mV for 20 mV",
+        1e3 * offset_v
+    );
+    // K'(u) half the thesis', on the chirp: the base's own K'(u) refitted and named, its
+    // terms within a few per cent (they came back to 1e-3 of them).
+    let mut truth = base.clone();
+    let gain = truth.nonlinear_gain.as_mut().unwrap();
+    gain.poly[1] = 0.01;
+    gain.poly[2] = -0.0005;
+    let (named, d) = diagnosed("K'(u) halved", &record(&truth, 73, chirp()));
+    assert_eq!(named, ["nonlinear-gain"], "K'(u) halved");
+    let poly = d.model.nonlinear_gain.as_ref().unwrap().poly;
+    assert!(
+        (poly[1] - 0.01).abs() < 5e-4 && (poly[2] + 0.0005).abs() < 5e-5,
+        "K'(u) terms {:.4e}, {:.4e} for 1e-2, -5e-4",
+        poly[1],
+        poly[2]
+    );
+}
+
 /// A Prandtl-Ishlinskii truth with its own radii (not the catalogue's): operators of radii
 /// `radii_v` and weights `weights` (input volts per volt), started at `z0` (positions, input
 /// volts; `None`: at the first input), applied to `u` before the linear stage.

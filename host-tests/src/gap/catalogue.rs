@@ -106,6 +106,32 @@ pub fn without_slow(m: &ModelFile) -> ModelFile {
     m
 }
 
+/// `m` without the slow effects but those in `keep`, which stay as `m` has them (the base
+/// model's own effects a diagnosis holds, `select`'s held set).
+pub fn without_slow_but(m: &ModelFile, keep: &[&str]) -> ModelFile {
+    keep.iter()
+        .fold(without_slow(m), |out, e| revert(&out, m, e))
+}
+
+/// Is `effect` in `m` as `base` gives it (the same section, or absent from both)?
+pub fn as_in(m: &ModelFile, base: &ModelFile, effect: &str) -> bool {
+    match effect {
+        "time-delay" => m.time_delay == base.time_delay,
+        "amplifier-pole" => m.amplifier_pole == base.amplifier_pole,
+        "resonance" => m.resonance == base.resonance,
+        "drift" => m.drift == base.drift,
+        "hysteresis" => {
+            m.hysteresis == base.hysteresis && m.hysteresis_play == base.hysteresis_play
+        }
+        "nonlinear-gain" => m.nonlinear_gain == base.nonlinear_gain,
+        "slew-rate-limit" => m.slew_rate_limit == base.slew_rate_limit,
+        "saturation" => m.saturation == base.saturation,
+        "sensor-gain" => m.sensor_gain == base.sensor_gain,
+        "offset" => m.offset == base.offset,
+        _ => true,
+    }
+}
+
 /// `m` without `effect`.
 pub fn without(m: &ModelFile, effect: &str) -> ModelFile {
     let mut m = m.clone();
@@ -320,7 +346,17 @@ pub struct SlowParams {
 /// `m` (without its slow effects) with the slow effects `p`; `u_range` is the inputs' span
 /// (the range of K(u) and K'(u)). `None` if the parameters are outside what the stage accepts.
 pub fn with_slow(m: &ModelFile, p: &SlowParams, u_range: (f64, f64)) -> Option<ModelFile> {
-    let mut m = without_slow(m);
+    with_slow_but(m, p, u_range, &[])
+}
+
+/// [`with_slow`], the slow effects in `keep` left as `m` has them (none of them in `p`).
+pub fn with_slow_but(
+    m: &ModelFile,
+    p: &SlowParams,
+    u_range: (f64, f64),
+    keep: &[&str],
+) -> Option<ModelFile> {
+    let mut m = without_slow_but(m, keep);
     if let Some((gains, taus)) = p.drift {
         m.drift = Some(DriftSection {
             gains,

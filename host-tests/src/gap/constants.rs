@@ -489,3 +489,14 @@ pub const INPUT_NOISE_MIN_SHARE: f64 = 0.25;
 /// drove the stage (the full thesis stage; a linear one with a delay or a pole the model
 /// lacks); our assumption: 0.3, near the two ranges' geometric middle).
 pub const INPUT_NOISE_FOLLOWED: f64 = 0.3;
+
+/// A candidate fitted with every present slow effect refitted, the base model's own among them,
+/// takes the place of the same candidate beside the base's effects as the base gives them
+/// (`SlowRegressors::held`) only where the latter leaves some record unexplained (above
+/// `unexplained::UNEXPLAINED_FLOOR_RATIO` times its floor) and the refit leaves at most this
+/// share of its residual power above the noise floor (our assumption: a refit of the lab's
+/// table or drift that no step names must earn its place clearly, as a step's bar asks of a
+/// new effect; measured on `thesis-full` with its drift or its table taken out of the base, on
+/// a chirp, a FORC scan, steps and a triangle: the drift's refit left 0.005-0.07 of what the
+/// held base left, the table's 0.006-0.28 where held did worse).
+pub const REFIT_ALL_SHARE: f64 = 0.5;

@@ -15,9 +15,9 @@ use super::constants::{
     CREEP_START_SHARE, CREEP_START_UNPINNED_SHARE, DRIFT_TAIL_KEEP_NOISE, DRIFT_TAIL_MIN_NOISE,
     FOLLOW_MIN_CORRELATION, HELD_LOOP_OVER_TAIL, HOLD_MIN_S, HYST_LOOP_MIN_NOISE, MAX_STEPS,
     MIN_EXPLAINED, MSE_MIN_V2, OCCAM_SWAP_RATIO, PAIR_FLOOR_RATIO, PRUNE_KEEP_EXCESS_VAR,
-    PRUNE_PER_PARAM, PRUNE_RATIO, REST_ZERO_INPUT_V, REST_ZERO_SHOWN_MIN, REST_ZERO_SIGMAS,
-    REVERSED_CORRELATION, REVERSED_MIN_FLOORS, RISE_CHOICE_RATIO, SAME_READING_FLOORS,
-    SCALE_APART_MAX, STATIC_TELL_RATIO, STOP_FLOOR_RATIO, STRUCTURE_ROUNDS,
+    PRUNE_PER_PARAM, PRUNE_RATIO, REFIT_ALL_SHARE, REST_ZERO_INPUT_V, REST_ZERO_SHOWN_MIN,
+    REST_ZERO_SIGMAS, REVERSED_CORRELATION, REVERSED_MIN_FLOORS, RISE_CHOICE_RATIO,
+    SAME_READING_FLOORS, SCALE_APART_MAX, STATIC_TELL_RATIO, STOP_FLOOR_RATIO, STRUCTURE_ROUNDS,
 };
 use super::cycle_noise::cycle_bar_v;
 use super::data::{
@@ -1479,7 +1479,8 @@ pub fn diagnose(base: &ModelFile, data: &[Data], opts: &Options) -> anyhow::Resu
     }
     let base_sigs = signatures::compute(data, &base_sims, &noise);
     let rows = solve_rows(data, base, &noise)?;
-    let slow_x = slow_regressors(data, rows, &[], base.plant.static_gain, CentreLine::Band);
+    let slow_x = slow_regressors(data, rows, &[], base.plant.static_gain, CentreLine::Band)
+        .holding(base, data, u_range);
     let (kept_x, other_x, centre_line) = choose_centre_line(base, data, slow_x, &var, u_range);
     let setup = Setup {
         base,
@@ -1605,8 +1606,15 @@ fn diagnose_split(
                 EFFECTS.len()
             ));
         }
-        let (mut cands, unsearched) =
-            candidates(&model, data, &slow_x, &cur_mse, u_range, &sigs, &named)?;
+        let (mut cands, unsearched) = candidates(
+            &model,
+            data,
+            &slow_x,
+            (&cur_mse, &var),
+            u_range,
+            &sigs,
+            &named,
+        )?;
         // Holds that show tails and levels apart by the step's direction: a creep and a loop
         // together, the pair every piezo stage has. The loop alone is not admitted beside
         // tails (a creep that has not caught up leaves levels apart too), and the drift
@@ -2612,8 +2620,12 @@ fn diagnose_split(
     // moves the fast record their fit shares, and the steps' candidates search one round),
     // kept where no record's residual grows and their sum falls.
     if !at_floor_now(&cur_mse, &floor_var) {
-        // (the set `refit_slow` refits)
-        let slow = present_slow(&model);
+        // (the set `refit_slow` refits: not the base's own effects the diagnosis holds)
+        let held = slow_x.held(&model);
+        let slow: Vec<&str> = present_slow(&model)
+            .into_iter()
+            .filter(|e| !held.contains(e))
+            .collect();
         if !slow.is_empty()
             && let Some(m) = refit_slow(&model, &[], data, &slow_x, u_range)
             && let Ok((s, ms)) = simulate_all(&m, data)
@@ -3838,7 +3850,12 @@ fn refit_slow_rounds(
     u_range: (f64, f64),
     rounds: usize,
 ) -> Option<ModelFile> {
-    let mut set = present_slow(m);
+    // (the base's own effects the diagnosis holds stay as they are, unless `extra` asks)
+    let held = slow_x.held(m);
+    let mut set: Vec<&str> = present_slow(m)
+        .into_iter()
+        .filter(|e| !held.contains(e))
+        .collect();
     for e in extra {
         if !set.contains(e) {
             set.push(e);
@@ -3847,14 +3864,15 @@ fn refit_slow_rounds(
     if set.is_empty() {
         return Some(m.clone());
     }
-    let b0 = catalogue::without_slow(m);
+    let keep: Vec<&str> = held.into_iter().filter(|e| !set.contains(e)).collect();
+    let b0 = catalogue::without_slow_but(m, &keep);
     let y0: Vec<Vec<f64>> = data
         .iter()
         .map(|d| sim(&b0, d))
         .collect::<anyhow::Result<_>>()
         .ok()?;
-    let p = fit_slow(data, &y0, slow_x, &set, u_range, rounds)?;
-    catalogue::with_slow(m, &p, u_range)
+    let p = fit_slow(data, &y0, slow_x.for_set(&set), &set, u_range, rounds)?;
+    catalogue::with_slow_but(m, &p, u_range, &keep)
 }
 
 /// A fitted candidate model, its simulations of the records and their mean squares.
@@ -3878,21 +3896,43 @@ fn candidates(
     model: &ModelFile,
     data: &[Data],
     slow_x: &SlowRegressors,
-    cur_mse: &[f64],
+    (cur_mse, var): (&[f64], &[f64]),
     u_range: (f64, f64),
     sigs: &signatures::Signatures,
     named: &[String],
 ) -> anyhow::Result<(Vec<Candidate>, Vec<LeftOut>)> {
     let peak_hz = sigs.peak_hz;
-    // Slow effects: one joint solve per candidate set.
-    let present_slow = present_slow(model);
-    // The model without slow effects on every record (the slow fits' base), simulated in the
-    // pool below as its first job (the slow records' simulation is a core's work for a while).
-    let base0 = catalogue::without_slow(model);
-    let y0_cell: std::sync::OnceLock<Result<Vec<Vec<f64>>, String>> = std::sync::OnceLock::new();
-    let y0 = || -> anyhow::Result<&Vec<Vec<f64>>> {
-        y0_cell
+    // Slow effects: one joint solve per candidate set. The base's own effects the diagnosis
+    // holds (`SlowRegressors::held`) stay as they are beside a new effect; a refit of one of
+    // them is its own candidate.
+    let present_all = present_slow(model);
+    let held = slow_x.held(model);
+    let present_slow: Vec<&str> = present_all
+        .iter()
+        .copied()
+        .filter(|e| !held.contains(e))
+        .collect();
+    // The held effects a set leaves in the model the slow fits start from.
+    let keep_of = |set: &[&str]| -> Vec<&'static str> {
+        held.iter().copied().filter(|e| !set.contains(e)).collect()
+    };
+    // The model without the slow effects a set fits, on every record (the slow fits' base),
+    // one per distinct set of held effects kept; the common one simulated in the pool below as
+    // its first job (the slow records' simulation is a core's work for a while).
+    let mut keeps: Vec<Vec<&'static str>> = vec![held.clone()];
+    for e in &held {
+        keeps.push(held.iter().copied().filter(|h| h != e).collect());
+    }
+    if !held.is_empty() {
+        keeps.push(Vec::new());
+    }
+    type Y0Cell = std::sync::OnceLock<Result<Vec<Vec<f64>>, String>>;
+    let y0_cells: Vec<Y0Cell> = keeps.iter().map(|_| std::sync::OnceLock::new()).collect();
+    let y0_for = |keep: &[&str]| -> anyhow::Result<&Vec<Vec<f64>>> {
+        let i = keeps.iter().position(|k| k == keep).unwrap_or(0);
+        y0_cells[i]
             .get_or_init(|| {
+                let base0 = catalogue::without_slow_but(model, &keeps[i]);
                 data.iter()
                     .map(|d| sim(&base0, d))
                     .collect::<anyhow::Result<_>>()
@@ -3901,22 +3941,52 @@ fn candidates(
             .as_ref()
             .map_err(|e| anyhow::anyhow!("{e}"))
     };
+    let y0 = || y0_for(&held);
     let mut sets: Vec<(String, bool, Vec<&str>)> = SLOW
         .iter()
-        .filter(|e| !present_slow.contains(e))
+        .filter(|e| !present_all.contains(e))
         .map(|e| {
             let mut s = present_slow.clone();
             s.push(e);
             (e.to_string(), false, s)
         })
         .collect();
-    for e in &present_slow {
-        sets.push((e.to_string(), true, present_slow.clone()));
+    for e in &present_all {
+        let mut s = present_slow.clone();
+        if held.contains(e) {
+            s.push(e);
+        }
+        sets.push((e.to_string(), true, s));
     }
+    // Beside each, where the diagnosis holds some of the base's own effects, the same
+    // candidate with every present slow effect refitted (the base's among them): kept in the
+    // held one's place only where the held one leaves some record unexplained (above
+    // `UNEXPLAINED_FLOOR_RATIO` times its floor) and the refit leaves clearly less
+    // (`REFIT_ALL_SHARE`): a base whose table or drift the records show to be off by more
+    // than a new effect's work. A base that explains the records with the new effect stays
+    // as it is: a model fitted to earlier records of the stage, given records with a 20 mV
+    // offset more, had its table refitted beside the offset (leaving 0.22 of what it left
+    // held), the table's constant took most of it, the offset came to 160 mV and the final
+    // check took it out as a level the records do not show; held, the offset is 20 mV.
+    let all_sets: Vec<Vec<&str>> = if held.is_empty() {
+        Vec::new()
+    } else {
+        sets.iter()
+            .map(|(e, _, _)| {
+                let mut s = present_all.clone();
+                if let Some(e) = SLOW.iter().find(|x| **x == e.as_str())
+                    && !s.contains(e)
+                {
+                    s.push(e);
+                }
+                s
+            })
+            .collect()
+    };
     // One joint solve per distinct set (every refit of a present effect shares the set of
     // the present ones), the solves in parallel.
     let mut distinct: Vec<Vec<&str>> = Vec::new();
-    for (_, _, set) in &sets {
+    for set in sets.iter().map(|(_, _, set)| set).chain(&all_sets) {
         if !distinct.contains(set) {
             distinct.push(set.clone());
         }
@@ -4021,8 +4091,18 @@ fn candidates(
     let done: Vec<anyhow::Result<Option<Fitted>>> = par_map(&tasks, |t| {
         let m = match t {
             Task::Base => return y0().map(|_| None),
-            Task::Slow(set) => fit_slow(data, y0()?, slow_x, set, u_range, CANDIDATE_ROUNDS)
-                .and_then(|p| catalogue::with_slow(model, &p, u_range)),
+            Task::Slow(set) => {
+                let keep = keep_of(set);
+                fit_slow(
+                    data,
+                    y0_for(&keep)?,
+                    slow_x.for_set(set),
+                    set,
+                    u_range,
+                    CANDIDATE_ROUNDS,
+                )
+                .and_then(|p| catalogue::with_slow_but(model, &p, u_range, &keep))
+            }
             Task::Fast(e) => fast_fit(e),
         };
         m.map(simulated).transpose()
@@ -4048,8 +4128,27 @@ fn candidates(
     };
     // In the order the candidates always had: the slow effects' sets, then the fast effects.
     let mut results = Vec::new();
-    for (effect, refit, set) in &sets {
-        if let Some((_, x)) = slow_done.iter().find(|(s, _)| s == set) {
+    // (the power a fit leaves above the records' floors)
+    let excess = |ms: &[f64]| -> f64 { ms.iter().zip(var).map(|(m, v)| (m - v).max(0.0)).sum() };
+    // (some record left above the bar of an unexplained part)
+    let r2 = super::unexplained::UNEXPLAINED_FLOOR_RATIO.powi(2);
+    let unexplained_by = |ms: &[f64]| ms.iter().zip(var).any(|(m, v)| *m > r2 * v);
+    for (i, (effect, refit, set)) in sets.iter().enumerate() {
+        let held_fit = slow_done.iter().find(|(s, _)| s == set).map(|(_, x)| x);
+        let all_fit = all_sets
+            .get(i)
+            .and_then(|a| slow_done.iter().find(|(s, _)| s == a))
+            .map(|(_, x)| x);
+        let chosen = match (held_fit, all_fit) {
+            (Some(h), Some(a))
+                if unexplained_by(&h.2) && excess(&a.2) < REFIT_ALL_SHARE * excess(&h.2) =>
+            {
+                Some(a)
+            }
+            (Some(h), _) => Some(h),
+            (None, a) => a,
+        };
+        if let Some(x) = chosen {
             results.push(candidate(effect, *refit, x));
         }
     }
