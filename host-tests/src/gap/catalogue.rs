@@ -12,7 +12,9 @@
 //!   constants, play thresholds); the sensor's `sensor-gain` (scale error: the residual is
 //!   proportional to the simulated output) and `offset` (a constant) are linear outright. They are fitted together, by one weighted least-squares
 //!   solve on the settled samples of all records (time constants chosen from a log grid by the
-//!   same solve), so an effect already in the model is refitted with the new one.
+//!   same solve), so an effect already in the model is refitted with the new one; a base
+//!   model's own slow effects are held as it gives them until a step names their refit
+//!   (`select`'s candidates, `SlowRegressors::held`).
 //!
 //! Every candidate is then checked the same way: the whole augmented model is simulated on
 //! every record by [`model_core::stage::Stage`] (never by a second simulator) and scored.

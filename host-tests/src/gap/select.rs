@@ -4143,13 +4143,23 @@ fn candidates(
             (Some(h), Some(a))
                 if unexplained_by(&h.2) && excess(&a.2) < REFIT_ALL_SHARE * excess(&h.2) =>
             {
-                Some(a)
+                Some((a, true))
             }
-            (Some(h), _) => Some(h),
-            (None, a) => a,
+            (Some(h), _) => Some((h, false)),
+            (None, a) => a.map(|a| (a, true)),
         };
-        if let Some(x) = chosen {
-            results.push(candidate(effect, *refit, x));
+        if let Some((x, all)) = chosen {
+            let mut c = candidate(effect, *refit, x);
+            // (a candidate that refits the base's held effects as well is scored with their
+            // parameters: the same evidence asked of naming them)
+            if all {
+                c.k += held
+                    .iter()
+                    .filter(|h| **h != effect.as_str())
+                    .map(|h| catalogue::param_count(h))
+                    .sum::<usize>();
+            }
+            results.push(c);
         }
     }
     for e in FAST {
