@@ -969,8 +969,8 @@ fn a_base_with_slow_effects_of_its_own_is_held_as_given() {
             .collect();
         (t, u)
     };
-    let diagnosed = |label: &str, data: &[Data]| {
-        let d = diagnose(&base, data, &Options::default()).unwrap();
+    let diagnosed_from = |base: &ModelFile, label: &str, data: &[Data]| {
+        let d = diagnose(base, data, &Options::default()).unwrap();
         println!("{label}\n{}", d.table());
         let mut named: Vec<String> = d.named.clone();
         named.sort();
@@ -980,6 +980,7 @@ fn a_base_with_slow_effects_of_its_own_is_held_as_given() {
         assert!(ratio <= 1.2, "{label}: final {ratio:.2}x the floor");
         (named, d)
     };
+    let diagnosed = |label: &str, data: &[Data]| diagnosed_from(&base, label, data);
     // The stage as the base gives it: nothing to name.
     let (named, _) = diagnosed("the base's own stage", &record(&base, 71, sine()));
     assert!(named.is_empty(), "the base's own stage: named {named:?}");
@@ -993,6 +994,21 @@ fn a_base_with_slow_effects_of_its_own_is_held_as_given() {
     assert!(
         (offset_v - 0.02).abs() < 1e-3,
         "offset {:.2} mV for 20 mV",
+        1e3 * offset_v
+    );
+    // A base with a sensor scale of its own (not held: it scales the others in the stage),
+    // the records with the offset besides (before, the diagnosis was refused: a split's fit
+    // came out NaN).
+    let mut scaled = base.clone();
+    scaled.sensor_gain = Some(host_tests::io::model_file::SensorGainSection { gain: 1.02 });
+    let mut truth = scaled.clone();
+    truth.offset = Some(host_tests::io::model_file::OffsetSection { offset_v: 0.02 });
+    let (named, d) = diagnosed_from(&scaled, "a scaled base", &record(&truth, 74, sine()));
+    assert_eq!(named, ["offset"], "a scaled base");
+    let offset_v = d.model.offset.as_ref().map_or(0.0, |o| o.offset_v);
+    assert!(
+        (offset_v - 0.02).abs() < 1e-3,
+        "a scaled base: offset {:.2} mV for 20 mV",
         1e3 * offset_v
     );
     // K'(u) half the thesis', on the chirp: the base's own K'(u) refitted and named, its

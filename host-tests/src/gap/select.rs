@@ -3929,7 +3929,11 @@ fn candidates(
     type Y0Cell = std::sync::OnceLock<Result<Vec<Vec<f64>>, String>>;
     let y0_cells: Vec<Y0Cell> = keeps.iter().map(|_| std::sync::OnceLock::new()).collect();
     let y0_for = |keep: &[&str]| -> anyhow::Result<&Vec<Vec<f64>>> {
-        let i = keeps.iter().position(|k| k == keep).unwrap_or(0);
+        // (every set's kept effects are among these: the held ones, all but one of them, or
+        // none; any other would be an error of this function, said, not a wrong base)
+        let i = keeps.iter().position(|k| k == keep).ok_or_else(|| {
+            anyhow::anyhow!("no model without slow effects kept for the held {keep:?}")
+        })?;
         y0_cells[i]
             .get_or_init(|| {
                 let base0 = catalogue::without_slow_but(model, &keeps[i]);
@@ -3952,10 +3956,13 @@ fn candidates(
         })
         .collect();
     for e in &present_all {
-        let mut s = present_slow.clone();
-        if held.contains(e) {
-            s.push(e);
-        }
+        // (in the catalogue's order, as the refit of everything has it: one solve for the two
+        // where they are the same set)
+        let s: Vec<&str> = SLOW
+            .iter()
+            .copied()
+            .filter(|x| present_slow.contains(x) || (x == e && held.contains(e)))
+            .collect();
         sets.push((e.to_string(), true, s));
     }
     // Beside each, where the diagnosis holds some of the base's own effects, the same
@@ -4146,7 +4153,9 @@ fn candidates(
                 Some((a, true))
             }
             (Some(h), _) => Some((h, false)),
-            (None, a) => a.map(|a| (a, true)),
+            // (the refit of everything is weighed against the held fit; without one, no
+            // candidate)
+            (None, _) => None,
         };
         if let Some((x, all)) = chosen {
             let mut c = candidate(effect, *refit, x);

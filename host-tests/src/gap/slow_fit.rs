@@ -371,8 +371,14 @@ impl SlowRegressors {
             fits: Default::default(),
             held_base: self.held_base.clone(),
             held_range: self.held_range,
-            beside_table: None,
-            beside_kprime: None,
+            beside_table: self
+                .beside_table
+                .as_ref()
+                .map(|t| Box::new(t.for_other_outputs())),
+            beside_kprime: self
+                .beside_kprime
+                .as_ref()
+                .map(|t| Box::new(t.for_other_outputs())),
         }
     }
 
@@ -406,12 +412,7 @@ impl SlowRegressors {
     /// the thesis stage without its table, 13x the floor). K'(u) is clamped to the records'
     /// span here, to its own range in the stage: the same where the records stay within it.
     fn with_held_twins(mut self, data: &[Data]) -> Self {
-        let kprime = self
-            .held_base
-            .as_ref()
-            .and_then(|b| b.nonlinear_gain.as_ref())
-            .filter(|g| g.poly.iter().skip(3).all(|c| *c == 0.0) && g.poly[0] == 1.0)
-            .map(|g| (g.poly[1], g.poly[2]));
+        let kprime = self.held_base.as_deref().and_then(held_kprime);
         if let Some(k) = kprime {
             let shape = Shape {
                 kprime: Some(k),
@@ -470,9 +471,12 @@ impl SlowRegressors {
             cols[COL_GAIN] = rows.iter().map(|&i| u[i] * h[i]).collect();
             cols[COL_GAIN + 1] = rows.iter().map(|&i| u[i] * u[i] * h[i]).collect();
         }
-        // (its Gram matrix and moments are of the other columns: computed afresh)
+        // (its Gram matrix and moments are of the other columns: computed afresh; it is a
+        // twin, with none of its own)
         twin.gram = std::sync::OnceLock::new();
         twin.moments = Default::default();
+        twin.beside_table = None;
+        twin.beside_kprime = None;
         self.beside_table = Some(Box::new(twin));
         self
     }
@@ -484,15 +488,35 @@ impl SlowRegressors {
     /// names would take up an effect's work silently (the thesis' full stage with a 20 mV
     /// sensor offset, diagnosed from `thesis-full`: the offset went into a refitted table and
     /// nothing was named). Empty for a base without slow effects (`thesis-linear`).
+    ///
+    /// Not held, refitted beside every candidate as before: a `sensor-gain` (it scales every
+    /// other slow effect in the stage, and the solve divides their terms by a fitted scale
+    /// only), a K'(u) of higher order than the quadratic and a play-form table (no twin of
+    /// the regressors carries them: [`Self::for_set`]).
     pub(super) fn held(&self, m: &ModelFile) -> Vec<&'static str> {
         self.held_base.as_ref().map_or_else(Vec::new, |b| {
             catalogue::SLOW
                 .iter()
                 .copied()
+                .filter(|e| match *e {
+                    "sensor-gain" => false,
+                    "nonlinear-gain" => held_kprime(b).is_some(),
+                    "hysteresis" => b.hysteresis_play.is_none(),
+                    _ => true,
+                })
                 .filter(|e| catalogue::present(b, e) && catalogue::as_in(m, b, e))
                 .collect()
         })
     }
+}
+
+/// The base's K'(u) as the regressors' shape holds it (`1 + c1 u + c2 u^2`): `None` without
+/// one, or for one of another form (higher terms, another constant), which is not held.
+fn held_kprime(base: &ModelFile) -> Option<(f64, f64)> {
+    base.nonlinear_gain
+        .as_ref()
+        .filter(|g| g.poly.iter().skip(3).all(|c| *c == 0.0) && g.poly[0] == 1.0)
+        .map(|g| (g.poly[1], g.poly[2]))
 }
 
 /// After the group delay (`solve_rows`), the stage's output may leave its quasi-static map by
