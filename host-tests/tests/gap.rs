@@ -985,32 +985,26 @@ fn a_base_with_slow_effects_of_its_own_is_held_as_given() {
     let (named, _) = diagnosed("the base's own stage", &record(&base, 71, sine()));
     assert!(named.is_empty(), "the base's own stage: named {named:?}");
     // A sensor offset: named, at its value (noise of 2.5 mV over 50 000 samples; the
-    // tolerance covers the table's f32 grid and the ADC's codes).
-    let mut truth = base.clone();
-    truth.offset = Some(host_tests::io::model_file::OffsetSection { offset_v: 0.02 });
-    let (named, d) = diagnosed("a 20 mV offset", &record(&truth, 72, sine()));
-    assert_eq!(named, ["offset"], "a 20 mV offset");
-    let offset_v = d.model.offset.as_ref().map_or(0.0, |o| o.offset_v);
-    assert!(
-        (offset_v - 0.02).abs() < 1e-3,
-        "offset {:.2} mV for 20 mV",
-        1e3 * offset_v
-    );
-    // A base with a sensor scale of its own (not held: it scales the others in the stage),
-    // the records with the offset besides (before, the diagnosis was refused: a split's fit
-    // came out NaN).
+    // tolerance covers the table's f32 grid and the ADC's codes), from `thesis-full` and from
+    // a base with a sensor scale of its own (not held: it scales the others in the stage;
+    // before, that diagnosis was refused: a split's fit came out NaN).
     let mut scaled = base.clone();
     scaled.sensor_gain = Some(host_tests::io::model_file::SensorGainSection { gain: 1.02 });
-    let mut truth = scaled.clone();
-    truth.offset = Some(host_tests::io::model_file::OffsetSection { offset_v: 0.02 });
-    let (named, d) = diagnosed_from(&scaled, "a scaled base", &record(&truth, 74, sine()));
-    assert_eq!(named, ["offset"], "a scaled base");
-    let offset_v = d.model.offset.as_ref().map_or(0.0, |o| o.offset_v);
-    assert!(
-        (offset_v - 0.02).abs() < 1e-3,
-        "a scaled base: offset {:.2} mV for 20 mV",
-        1e3 * offset_v
-    );
+    for (label, from, seed) in [
+        ("a 20 mV offset", &base, 72),
+        ("a scaled base", &scaled, 74),
+    ] {
+        let mut truth = from.clone();
+        truth.offset = Some(host_tests::io::model_file::OffsetSection { offset_v: 0.02 });
+        let (named, d) = diagnosed_from(from, label, &record(&truth, seed, sine()));
+        assert_eq!(named, ["offset"], "{label}");
+        let offset_v = d.model.offset.as_ref().map_or(0.0, |o| o.offset_v);
+        assert!(
+            (offset_v - 0.02).abs() < 1e-3,
+            "{label}: offset {:.2} mV for 20 mV",
+            1e3 * offset_v
+        );
+    }
     // K'(u) half the thesis', on the chirp: the base's own K'(u) refitted and named, its
     // terms within a few per cent (they came back to 1e-3 of them).
     let mut truth = base.clone();
