@@ -345,13 +345,9 @@ pub struct SlowParams {
     pub offset_v: Option<f64>,
 }
 
-/// `m` (without its slow effects) with the slow effects `p`; `u_range` is the inputs' span
-/// (the range of K(u) and K'(u)). `None` if the parameters are outside what the stage accepts.
-pub fn with_slow(m: &ModelFile, p: &SlowParams, u_range: (f64, f64)) -> Option<ModelFile> {
-    with_slow_but(m, p, u_range, &[])
-}
-
-/// [`with_slow`], the slow effects in `keep` left as `m` has them (none of them in `p`).
+/// `m` (without its slow effects but those in `keep`, which stay as `m` has them and none of
+/// which `p` holds) with the slow effects `p`; `u_range` is the inputs' span (the range of
+/// K(u) and K'(u)). `None` if the parameters are outside what the stage accepts.
 pub fn with_slow_but(
     m: &ModelFile,
     p: &SlowParams,

@@ -2620,12 +2620,8 @@ fn diagnose_split(
     // moves the fast record their fit shares, and the steps' candidates search one round),
     // kept where no record's residual grows and their sum falls.
     if !at_floor_now(&cur_mse, &floor_var) {
-        // (the set `refit_slow` refits: not the base's own effects the diagnosis holds)
-        let held = slow_x.held(&model);
-        let slow: Vec<&str> = present_slow(&model)
-            .into_iter()
-            .filter(|e| !held.contains(e))
-            .collect();
+        // (the set `refit_slow` refits)
+        let slow = fitted_slow(&model, &slow_x);
         if !slow.is_empty()
             && let Some(m) = refit_slow(&model, &[], data, &slow_x, u_range)
             && let Ok((s, ms)) = simulate_all(&m, data)
@@ -3589,6 +3585,16 @@ fn present_slow(m: &ModelFile) -> Vec<&'static str> {
         .collect()
 }
 
+/// The slow effects in `m` a refit fits: those present less the base's own the diagnosis
+/// holds ([`SlowRegressors::held`]).
+fn fitted_slow(m: &ModelFile, slow_x: &SlowRegressors) -> Vec<&'static str> {
+    let held = slow_x.held(m);
+    present_slow(m)
+        .into_iter()
+        .filter(|e| !held.contains(e))
+        .collect()
+}
+
 /// The parameters of `effect` in `m`, as a step's JSON holds them.
 fn params_json(m: &ModelFile, effect: &str) -> serde_json::Map<String, serde_json::Value> {
     catalogue::params_of(m, effect)
@@ -3852,10 +3858,7 @@ fn refit_slow_rounds(
 ) -> Option<ModelFile> {
     // (the base's own effects the diagnosis holds stay as they are, unless `extra` asks)
     let held = slow_x.held(m);
-    let mut set: Vec<&str> = present_slow(m)
-        .into_iter()
-        .filter(|e| !held.contains(e))
-        .collect();
+    let mut set = fitted_slow(m, slow_x);
     for e in extra {
         if !set.contains(e) {
             set.push(e);
@@ -3907,11 +3910,7 @@ fn candidates(
     // them is its own candidate.
     let present_all = present_slow(model);
     let held = slow_x.held(model);
-    let present_slow: Vec<&str> = present_all
-        .iter()
-        .copied()
-        .filter(|e| !held.contains(e))
-        .collect();
+    let present_slow = fitted_slow(model, slow_x);
     // The held effects a set leaves in the model the slow fits start from.
     let keep_of = |set: &[&str]| -> Vec<&'static str> {
         held.iter().copied().filter(|e| !set.contains(e)).collect()

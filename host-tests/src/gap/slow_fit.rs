@@ -1013,7 +1013,7 @@ fn gram_new_lags(x: &SlowRegressors, g_base: &DMatrix<f64>) -> DMatrix<f64> {
 /// A refinement whose solve is singular keeps the previous fit.
 ///
 /// `u_range` is the range the model file gets for K'(u) and K(u) below its knee
-/// ([`catalogue::with_slow`]), so a K accepted here is one the stage accepts.
+/// ([`catalogue::with_slow_but`]), so a K accepted here is one the stage accepts.
 ///
 /// A fit these regressors ran before against the same `y0` (every bit, as a 64-bit hash, as
 /// the products' key), set and span, whose rounds went as this call's would
