@@ -1617,3 +1617,116 @@ fn untold_held_levels_leave_the_loop_to_the_memoryless_twin() {
         );
     }
 }
+
+/// Issue #12's single-sine requirement (one 10 s record at 5 kHz of a 1 Hz sine over
+/// 0.5-9.5 V, a Preisach-class loop 10-15 % of the span, a sensor offset of 10-30 mV either
+/// sign, 1 mV of noise) with loops this workflow was not shaped on: Preisach planes
+/// (Gaussian or Lorentzian density) and Prandtl-Ishlinskii operators with random radii, drawn
+/// as the suite draws them, with monotone branches (a Preisach density is >= 0), half of them
+/// after earlier excursions. A probe, not a gate: it prints each seed's names, final residual,
+/// whether a missed offset is reported as one the records cannot tell, and the count meeting
+/// the requirement (`SINE_SEEDS=a,b,...`, default 7001-7016; `GAP_DEBUG=1` each diagnosis'
+/// table; `SINE_CENTRE=1` the truth's centre line over the record's cycles after the first,
+/// less `g u` and the offset, by 0.5 V bin: how far the relays the sine never switches bend
+/// it). Measured in session 56 (GAP.md): the requirement met on 1 of 16.
+#[test]
+#[ignore = "a probe of issue #12's single-sine requirement on the families' loops"]
+fn the_issues_single_sine_with_the_families_loops() {
+    let seeds: Vec<u64> = std::env::var("SINE_SEEDS").map_or((7001..7017).collect(), |s| {
+        s.split(',').map(|x| x.parse().unwrap()).collect()
+    });
+    let base = ModelFile::built_in("thesis-linear").unwrap();
+    let runs = host_tests::util::par_map(&seeds, |&seed| {
+        let mut rng = StdRng::seed_from_u64(seed);
+        let hysteresis = loop {
+            let mut h = Hysteresis::draw(&mut rng);
+            if matches!(h.form, HystForm::Preisach { .. } | HystForm::Pi { .. })
+                && h.min_slope() >= 0.0
+            {
+                // The requirement's loop: 10-15 % of the span.
+                let share = rng.gen_range(0.10..0.15);
+                h.scale *= share / h.share;
+                h.share = share;
+                break h;
+            }
+        };
+        let offset_v = rng.gen_range(0.01..0.03) * if rng.gen_bool(0.5) { 1.0 } else { -1.0 };
+        let rate_hz = 5_000.0;
+        let t_s: Vec<f64> = (0..50_000).map(|i| i as f64 / rate_hz).collect();
+        let u_v = t_s
+            .iter()
+            .map(|t| 5.0 - 4.5 * (2.0 * std::f64::consts::PI * t).cos())
+            .collect();
+        let protocol = Protocol {
+            family: Family::LongSine,
+            records: vec![families::Input {
+                name: "sine.csv".into(),
+                t_s,
+                u_v,
+            }],
+            desc: "5 kHz 10 s, 1 Hz sine 5.0 +- 4.5 V".into(),
+            step_rate_hz: None,
+            holds: false,
+        };
+        let mut case = Case::of(seed, protocol, vec!["hysteresis", "offset"]);
+        case.hysteresis = Some(hysteresis);
+        case.offset_v = Some(offset_v);
+        let recs = case.records();
+        if std::env::var("SINE_CENTRE").is_ok() {
+            // The truth's centre line over the record's cycles after the first: bins of the
+            // input, the mean of the rising and the falling samples in each, less g u and the
+            // offset: its mean and its slope.
+            let r = &recs[0];
+            let g = base.plant.static_gain;
+            let nb = 18;
+            let mut up = vec![(0.0, 0usize); nb];
+            let mut dn = vec![(0.0, 0usize); nb];
+            for i in 5_000..r.u_v.len() - 1 {
+                let k = (((r.u_v[i] - 0.5) / 9.0 * nb as f64) as usize).min(nb - 1);
+                let e = r.y_v[i] - g * r.u_v[i] - offset_v;
+                let b = if r.u_v[i + 1] > r.u_v[i] {
+                    &mut up[k]
+                } else {
+                    &mut dn[k]
+                };
+                b.0 += e;
+                b.1 += 1;
+            }
+            let c: Vec<f64> = (0..nb)
+                .map(|k| 0.5 * (up[k].0 / up[k].1 as f64 + dn[k].0 / dn[k].1 as f64))
+                .collect();
+            println!(
+                "seed {seed}: centre line less g u, mV by bin: {:?}",
+                c.iter().map(|x| (1e3 * x).round()).collect::<Vec<_>>()
+            );
+        }
+        let d = diagnose(&base, &recs, &Options::default()).expect("diagnosis");
+        (case.describe(), d)
+    });
+    let mut met = 0;
+    for (seed, (describe, d)) in seeds.iter().zip(&runs) {
+        let mut named = d.named.clone();
+        named.sort();
+        let ratio = d.final_rms_v / d.noise_floor_v;
+        let ok = named == ["hysteresis", "offset"] && ratio <= 2.0;
+        met += usize::from(ok);
+        if std::env::var("GAP_DEBUG").is_ok() {
+            println!("{}", d.table());
+        }
+        let offset_said = d
+            .cannot_tell
+            .iter()
+            .any(|k| k.named == "offset" || k.alternative == "offset");
+        println!(
+            "{} seed {seed}: named {named:?}, final {ratio:.2}x the floor, offset {:.1} mV{}; {describe}",
+            if ok { "ok  " } else { "MISS" },
+            1e3 * d.model.offset.as_ref().map_or(0.0, |o| o.offset_v),
+            if offset_said {
+                " (offset: cannot tell)"
+            } else {
+                ""
+            },
+        );
+    }
+    println!("the requirement met on {met} of {} seeds", seeds.len());
+}
