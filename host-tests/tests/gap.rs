@@ -1868,7 +1868,8 @@ fn a_record_in_milliseconds_or_with_a_reversed_sign_is_refused_clearly() {
 /// A sensor that is not there or not in range, refused with words that say which: one
 /// unplugged (the output is its own 1 mV of noise: before, a false `hysteresis` at 2767x the
 /// floor), and one clipped by its logger at 7 V, below the stage's top (before: nothing named,
-/// 24.8x the floor, an `unexplained` part at the top of the input). A clean record of the
+/// 24.8x the floor, an `unexplained` part at the top of the input), exactly or under the
+/// converter's own noise (session 56: `hysteresis` named before). A clean record of the
 /// same stage is not refused, nor one 16 ms late and rounded to 8 bits (its top code at 4 %
 /// of the samples, where the model's output moves), nor one held at its top level and rounded
 /// by a coarse (8-bit)
@@ -1905,6 +1906,19 @@ fn a_disconnected_or_clipped_sensor_is_refused_clearly() {
             && err.contains("clipped at its range"),
         "{err}"
     );
+    // (the same saturation before the converter, read with 1 mV of the converter's own
+    // noise: no two readings equal; before: `hysteresis` named at 10-17x the floor)
+    let jitter = host_tests::testing::filtered_noise(t.len(), 5e3, 0.0, 0, 6);
+    let saturated: Vec<f64> = y
+        .iter()
+        .zip(&jitter)
+        .map(|(v, w)| v.min(7.0) + 1e-3 * w)
+        .collect();
+    let err = refusal(&truth, &one("saturated.csv", saturated));
+    assert!(
+        err.contains("saturated.csv") && err.contains("of 7.00") && err.contains("saturated"),
+        "{err}"
+    );
     assert_eq!(refusal(&truth, &one("clean.csv", y.clone())), "");
     // (an output 16 ms late, as a loop lags, rounded to 8 bits over 9 V: its top code holds
     // 4 % of the samples while the model's output moves 0.1 V over them, but the record's
@@ -1914,7 +1928,10 @@ fn a_disconnected_or_clipped_sensor_is_refused_clearly() {
         .map(|i| (y[i.saturating_sub(80)] / code).round() * code)
         .collect();
     let err = refusal(&truth, &one("late.csv", late));
-    assert!(!err.contains("clipped"), "{err}");
+    assert!(
+        !err.contains("clipped") && !err.contains("saturated"),
+        "{err}"
+    );
     // (held at 9 V for a second after the sine, rounded to 8 bits of 10 V: one code)
     let (mut th, mut uh, mut yh) = (t.clone(), u.clone(), y.clone());
     let stage = truth.build_stage().unwrap();

@@ -127,6 +127,18 @@ pub const FOLLOW_MIN_CORRELATION: f64 = 0.2;
 pub const CLIP_MIN_SAMPLES: usize = 100;
 /// ... as a share of the record's samples, where that is more.
 pub const CLIP_MIN_SHARE: f64 = 0.005;
+/// How far below (above) its top (bottom) level a record's output may read and still count as
+/// flattened there under noise (`select::flattened`), in noise floors (our assumption: white
+/// noise stays within four sigma of a level at all but 6e-5 of its samples; six leave room for
+/// the level itself being read from the noisy top).
+pub const CLIP_BAND_FLOORS: f64 = 6.0;
+/// The share of its span over the whole record by which the record's own line on the
+/// model's output must go past the record at its flattened samples for them to count as a
+/// saturated reading (`select::flattened`; our assumption: at a sine's crest, a step's
+/// overshoot or a held level the line stays with the record within the misfit, well under
+/// 1 % of the span; a sensor saturated 7 % below a thesis sine's top, the line fitted over
+/// the clipped record, leaves 5 %, the mildest saturation the test refuses).
+pub const CLIP_SPAN_SHARE: f64 = 0.02;
 
 /// Slowest sampling a record may have, Hz (issue #12: records of any rate from 1 kHz; slower,
 /// the stage's millisecond dynamics and its edges fall between samples, and the simulation's

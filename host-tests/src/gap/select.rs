@@ -11,13 +11,14 @@
 
 use super::catalogue::{self, EFFECTS, FAST, SLOW};
 use super::constants::{
-    CANDIDATE_ROUNDS, CANNOT_TELL_RATIO, CLIP_MIN_SAMPLES, CLIP_MIN_SHARE, CREEP_START_MIN_FLOORS,
-    CREEP_START_SHARE, CREEP_START_UNPINNED_SHARE, DRIFT_TAIL_KEEP_NOISE, DRIFT_TAIL_MIN_NOISE,
-    FOLLOW_MIN_CORRELATION, HELD_LOOP_OVER_TAIL, HOLD_MIN_S, HYST_LOOP_MIN_NOISE, MAX_STEPS,
-    MIN_EXPLAINED, MSE_MIN_V2, OCCAM_SWAP_RATIO, PAIR_FLOOR_RATIO, PRUNE_KEEP_EXCESS_VAR,
-    PRUNE_PER_PARAM, PRUNE_RATIO, REFIT_ALL_SHARE, REST_ZERO_INPUT_V, REST_ZERO_SHOWN_MIN,
-    REST_ZERO_SIGMAS, REVERSED_CORRELATION, REVERSED_MIN_FLOORS, RISE_CHOICE_RATIO,
-    SAME_READING_FLOORS, SCALE_APART_MAX, STATIC_TELL_RATIO, STOP_FLOOR_RATIO, STRUCTURE_ROUNDS,
+    CANDIDATE_ROUNDS, CANNOT_TELL_RATIO, CLIP_BAND_FLOORS, CLIP_MIN_SAMPLES, CLIP_MIN_SHARE,
+    CLIP_SPAN_SHARE, CREEP_START_MIN_FLOORS, CREEP_START_SHARE, CREEP_START_UNPINNED_SHARE,
+    DRIFT_TAIL_KEEP_NOISE, DRIFT_TAIL_MIN_NOISE, FOLLOW_MIN_CORRELATION, HELD_LOOP_OVER_TAIL,
+    HOLD_MIN_S, HYST_LOOP_MIN_NOISE, MAX_STEPS, MIN_EXPLAINED, MSE_MIN_V2, OCCAM_SWAP_RATIO,
+    PAIR_FLOOR_RATIO, PRUNE_KEEP_EXCESS_VAR, PRUNE_PER_PARAM, PRUNE_RATIO, REFIT_ALL_SHARE,
+    REST_ZERO_INPUT_V, REST_ZERO_SHOWN_MIN, REST_ZERO_SIGMAS, REVERSED_CORRELATION,
+    REVERSED_MIN_FLOORS, RISE_CHOICE_RATIO, SAME_READING_FLOORS, SCALE_APART_MAX,
+    STATIC_TELL_RATIO, STOP_FLOOR_RATIO, STRUCTURE_ROUNDS,
 };
 use super::cycle_noise::cycle_bar_v;
 use super::data::{
@@ -1291,6 +1292,48 @@ fn clipped(y: &[f64], sim: &[f64], floor_v: f64) -> Option<(f64, usize, f64)> {
         })
 }
 
+/// A record's output flattened at an extreme under noise (a sensor whose electronics
+/// saturated before the converter, read with the converter's own noise, so that no two
+/// readings need be equal and [`clipped`] sees nothing): the level its top (or bottom)
+/// `CLIP_MIN_SAMPLES` samples (`CLIP_MIN_SHARE` of the record where that is more) reach, the
+/// samples within `CLIP_BAND_FLOORS` noise floors `floor_v` of it at which the record's own
+/// line on the model's output goes past the record by `CLIP_SPAN_SHARE` of the line's span
+/// over the whole record or more (and `REVERSED_MIN_FLOORS` floors), where there are
+/// `CLIP_MIN_SAMPLES` of them (the model says the output went on where the record stood
+/// still), and how far past the line goes there at most. A sine's crest, a step's overshoot
+/// or a held top level keeps the line with the record (a loop's branches meet at the top, a
+/// hold's input does not move), so none is taken for one;
+/// nor is a record whose input `u` comes near the amplifier's limits, where its saturation,
+/// an effect of the catalogue, flattens the output the same way. `None` otherwise.
+fn flattened(u: &[f64], y: &[f64], sim: &[f64], floor_v: f64) -> Option<(f64, usize, f64)> {
+    let n = y.len().min(sim.len());
+    let need = CLIP_MIN_SAMPLES.max((CLIP_MIN_SHARE * n as f64).ceil() as usize);
+    if n < 2 * need || floor_v.is_nan() || floor_v <= 0.0 || signatures::near_amp_limits(min_max(u))
+    {
+        return None;
+    }
+    let m = LineFit::of(&y[..n], &sim[..n])?;
+    let line: Vec<f64> = sim[..n].iter().map(|s| m.at(*s)).collect();
+    let (line_lo, line_hi) = min_max(&line);
+    let bar = (CLIP_SPAN_SHARE * (line_hi - line_lo)).max(REVERSED_MIN_FLOORS * floor_v);
+    let mut sorted: Vec<f64> = y[..n].to_vec();
+    sorted.sort_by(f64::total_cmp);
+    [(sorted[n - need], 1.0), (sorted[need - 1], -1.0)]
+        .into_iter()
+        .find_map(|(level, sign)| {
+            // (the samples at the level where the line goes on past the record by the bar)
+            let past: Vec<f64> = (0..n)
+                .filter(|&i| sign * (y[i] - level) >= -CLIP_BAND_FLOORS * floor_v)
+                .map(|i| sign * (line[i] - y[i]))
+                .filter(|&p| p >= bar)
+                .collect();
+            (past.len() >= need).then(|| {
+                let most = past.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+                (level, past.len(), most)
+            })
+        })
+}
+
 /// Run the workflow from `base` on `data`.
 pub fn diagnose(base: &ModelFile, data: &[Data], opts: &Options) -> anyhow::Result<Diagnosis> {
     ensure!(!data.is_empty(), "no records given");
@@ -1378,6 +1421,19 @@ pub fn diagnose(base: &ModelFile, data: &[Data], opts: &Options) -> anyhow::Resu
                  stage, not a clipped recording: record within the range, or leave the clipped \
                  part out",
                 d.name,
+                100.0 * count as f64 / d.len() as f64,
+                1e3 * past_v
+            );
+        }
+        if let Some((level, count, past_v)) = flattened(&d.u_v, &d.y_v, s, *f) {
+            bail!(
+                "record {}: its output stays within {:.1} mV of {level:.4} V at {count} samples \
+                 ({:.1} % of the record) where the model's output, scaled to the record, goes \
+                 on, up to {:.1} mV past the reading: the sensor or its electronics saturated. The \
+                 workflow fits the stage, not a saturated reading: record within the sensor's \
+                 range, or leave the saturated part out",
+                d.name,
+                1e3 * CLIP_BAND_FLOORS * f,
                 100.0 * count as f64 / d.len() as f64,
                 1e3 * past_v
             );

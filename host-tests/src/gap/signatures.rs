@@ -481,8 +481,7 @@ impl Signatures {
     /// Does some record's input come within 0.5 V of the amplifier's input limits (where a
     /// saturation can show)?
     fn input_near_limits(&self) -> bool {
-        self.u_span_v.0 <= params::AMP_INPUT_MIN_V + 0.5
-            || self.u_span_v.1 >= params::AMP_INPUT_MAX_V - 0.5
+        near_amp_limits(self.u_span_v)
     }
 
     /// Does the residual show the signature of `effect` as `model` has it? (The gate of the
@@ -607,6 +606,13 @@ impl Signatures {
             _ => String::new(),
         }
     }
+}
+
+/// Does an input spanning `lo..hi` volts come within 0.5 V of the amplifier's input limits
+/// (where a saturation of the amplifier can show; our assumption: the E-505's output limits
+/// reached within half a volt of input, its gain 10)?
+pub fn near_amp_limits((lo, hi): (f64, f64)) -> bool {
+    lo <= params::AMP_INPUT_MIN_V + 0.5 || hi >= params::AMP_INPUT_MAX_V - 0.5
 }
 
 #[cfg(test)]
