@@ -1299,10 +1299,15 @@ fn clipped(y: &[f64], sim: &[f64], floor_v: f64) -> Option<(f64, usize, f64)> {
 /// samples within `CLIP_BAND_FLOORS` noise floors `floor_v` of it at which the record's own
 /// line on the model's output goes past the record by `CLIP_SPAN_SHARE` of the line's span
 /// over the whole record or more (and `REVERSED_MIN_FLOORS` floors), where there are
-/// `CLIP_MIN_SAMPLES` of them (the model says the output went on where the record stood
-/// still), and how far past the line goes there at most. A sine's crest, a step's overshoot
-/// or a held top level keeps the line with the record (a loop's branches meet at the top, a
-/// hold's input does not move), so none is taken for one;
+/// `CLIP_MIN_SAMPLES` of them and the line goes on towards the extreme by as much within
+/// one unbroken run of them (the model says the output went on, as the input did, where the
+/// record stood still), and how far past the line goes there at most. A sine's crest or a
+/// step's overshoot keeps the line with the record (a loop's branches meet at the top), a
+/// held level the model misses keeps it still, and a loop's reading stays put only after a
+/// reversal, while the line moves back from the extreme (families seeds 3100-3699: two
+/// random-levels records whose extreme level a loop held flat after a reversal, 190-270 mV
+/// from the line, were refused while the line's movement was taken either way), so none is
+/// taken for one;
 /// nor is a record whose input `u` comes near the amplifier's limits, where its saturation,
 /// an effect of the catalogue, flattens the output the same way. `None` otherwise.
 fn flattened(u: &[f64], y: &[f64], sim: &[f64], floor_v: f64) -> Option<(f64, usize, f64)> {
@@ -1322,14 +1327,30 @@ fn flattened(u: &[f64], y: &[f64], sim: &[f64], floor_v: f64) -> Option<(f64, us
         .into_iter()
         .find_map(|(level, sign)| {
             // (the samples at the level where the line goes on past the record by the bar)
-            let past: Vec<f64> = (0..n)
-                .filter(|&i| sign * (y[i] - level) >= -CLIP_BAND_FLOORS * floor_v)
-                .map(|i| sign * (line[i] - y[i]))
-                .filter(|&p| p >= bar)
+            let at: Vec<usize> = (0..n)
+                .filter(|&i| {
+                    sign * (y[i] - level) >= -CLIP_BAND_FLOORS * floor_v
+                        && sign * (line[i] - y[i]) >= bar
+                })
                 .collect();
-            (past.len() >= need).then(|| {
-                let most = past.iter().copied().fold(f64::NEG_INFINITY, f64::max);
-                (level, past.len(), most)
+            // (and goes on towards the extreme by the bar within one unbroken run of them, as
+            // the input does: a held level the model misses keeps the line still, and a
+            // loop's reading stays put only after a reversal, the line moving back)
+            let mut moves = 0.0f64;
+            let mut least = f64::INFINITY;
+            for (k, &i) in at.iter().enumerate() {
+                if k > 0 && i != at[k - 1] + 1 {
+                    least = f64::INFINITY;
+                }
+                least = least.min(sign * line[i]);
+                moves = moves.max(sign * line[i] - least);
+            }
+            (at.len() >= need && moves >= bar).then(|| {
+                let most = at
+                    .iter()
+                    .map(|&i| sign * (line[i] - y[i]))
+                    .fold(f64::NEG_INFINITY, f64::max);
+                (level, at.len(), most)
             })
         })
 }
