@@ -1673,9 +1673,9 @@ fn the_issues_single_sine_with_the_families_loops() {
         case.offset_v = Some(offset_v);
         let recs = case.records();
         if std::env::var("SINE_CENTRE").is_ok() {
-            // The truth's centre line over the record's cycles after the first: bins of the
-            // input, the mean of the rising and the falling samples in each, less g u and the
-            // offset: its mean and its slope.
+            // The truth's centre line over the record's cycles after the first: in each
+            // 0.5 V bin of the input, the mean of its rising and of its falling samples, less
+            // g u and the offset, averaged.
             let r = &recs[0];
             let g = base.plant.static_gain;
             let nb = 18;

@@ -1264,6 +1264,12 @@ fn not_following(y: &[f64], sim: &[f64], floor_v: f64) -> Option<LineFit> {
         .then_some(m)
 }
 
+/// Samples at an extreme that [`clipped`] and [`flattened`] need in a record of `n`:
+/// `CLIP_MIN_SAMPLES`, or `CLIP_MIN_SHARE` of the record where that is more.
+fn clip_need(n: usize) -> usize {
+    CLIP_MIN_SAMPLES.max((CLIP_MIN_SHARE * n as f64).ceil() as usize)
+}
+
 /// A record's output clipped by its sensor or logger: the extreme value (volts) its output
 /// reads exactly at `CLIP_MIN_SAMPLES` samples or more (`CLIP_MIN_SHARE` of the record where
 /// that is more), how many, and how far past it the record's own line on the model's output
@@ -1273,7 +1279,7 @@ fn not_following(y: &[f64], sim: &[f64], floor_v: f64) -> Option<LineFit> {
 /// loop), keeps the line within a code or two of the level. `None` otherwise.
 fn clipped(y: &[f64], sim: &[f64], floor_v: f64) -> Option<(f64, usize, f64)> {
     let n = y.len().min(sim.len());
-    let need = CLIP_MIN_SAMPLES.max((CLIP_MIN_SHARE * n as f64).ceil() as usize);
+    let need = clip_need(n);
     let m = LineFit::of(&y[..n], &sim[..n])?;
     let (lo, hi) = min_max(&y[..n]);
     [(hi, 1.0), (lo, -1.0)]
@@ -1312,7 +1318,7 @@ fn clipped(y: &[f64], sim: &[f64], floor_v: f64) -> Option<(f64, usize, f64)> {
 /// an effect of the catalogue, flattens the output the same way. `None` otherwise.
 fn flattened(u: &[f64], y: &[f64], sim: &[f64], floor_v: f64) -> Option<(f64, usize, f64)> {
     let n = y.len().min(sim.len());
-    let need = CLIP_MIN_SAMPLES.max((CLIP_MIN_SHARE * n as f64).ceil() as usize);
+    let need = clip_need(n);
     if n < 2 * need || floor_v.is_nan() || floor_v <= 0.0 || signatures::near_amp_limits(min_max(u))
     {
         return None;
