@@ -1628,7 +1628,8 @@ fn untold_held_levels_leave_the_loop_to_the_memoryless_twin() {
 /// the requirement (`SINE_SEEDS=a,b,...`, default 7001-7016; `GAP_DEBUG=1` each diagnosis'
 /// table; `SINE_CENTRE=1` the truth's centre line over the record's cycles after the first,
 /// less `g u` and the offset, by 0.5 V bin: how far the relays the sine never switches bend
-/// it). Measured in session 56 (GAP.md): the requirement met on 1 of 16.
+/// it). Measured in session 56 (GAP.md): the requirement met on 1 of 16, the final residual
+/// within 2x the floor on 3; in session 57, with step 20's tents: met on 1, within 2x on 6.
 #[test]
 #[ignore = "a probe of issue #12's single-sine requirement on the families' loops"]
 fn the_issues_single_sine_with_the_families_loops() {

@@ -10,7 +10,8 @@
 //! `r` (Prandtl-Ishlinskii: symmetric, congruent loops everywhere); those with centres in one
 //! band `[c_k, c_k+1]` make a **band-limited play operator**, whose output is the play
 //! operator's position clamped to the band. A weight per (radius, band) pair is a density that
-//! is piecewise constant along the centre and free along the width: narrow and wide
+//! is piecewise constant along the centre (piecewise linear for the tent split, below) and
+//! free along the width: narrow and wide
 //! operators, loops that differ from one end of the range to the other (asymmetric loops, a
 //! loop that is wider at the top), any shape of Everett table at that resolution.
 //!
@@ -78,6 +79,24 @@
 //! choose it (`select`: kept where hysteresis and drift leave less than
 //! [`crate::gap::RISE_CHOICE_RATIO`] of the band split's).
 //!
+//! # The tent split (session 57)
+//! A band's weight is a density constant across the band, so a density that changes smoothly
+//! along the centre axis (a Gaussian or Lorentzian Preisach plane) is fitted as a staircase,
+//! and its loop by the steps' misfit: on issue #12's single sine with the families' Preisach
+//! planes the band split left 1.4-7.9x the floor. [`CentreLine::Tent`] holds the same relays
+//! with tents instead of bands (`Centres::Hat`): tent `k` of radius `r` weights the centres
+//! by a hat of unit height on node [`HYST_TENT_INTERVALS`]` k`, falling to zero a band's width
+//! each side, the two at the range's ends half hats, so that with equal weights the tents sum
+//! to a uniform density (a play operator) and the density is linear between the peaks. Its
+//! Everett function is the hat's mass over the interval `T_rk` measures, and its memoryless
+//! part the hat's mass below the input, read at the nodes and interpolated between them as the
+//! table reads it (`Centres::below_on_nodes`; the exact mass is quadratic between nodes, and
+//! a column that left that out would differ from the fitted table's response). Twelve tents
+//! per radius against eleven bands. The workflow names its effects on the band split and
+//! refits the named table on the tent split at the end (`select`, step 20): as the split of
+//! every diagnosis the tents fitted the planes closer but named a false `offset` beside the
+//! four Bouc-Wen loops with a resonance of the hidden-effect suite (GAP.md, session 57).
+//!
 //! # Resolution and regulariser
 //! Radii: [`HYST_RADII`] at odd multiples of half the table's grid interval ([`radius_v`]:
 //! the basis follows the table's own resolution instead of a fixed list of radii);
@@ -99,7 +118,24 @@ use model_core::params;
 /// Bands along the Preisach plane's centre axis: the layout's capacity, the largest of the
 /// splits' counts ([`CentreLine::bands`]); a split with fewer leaves the columns of the
 /// bands it does not use at zero and out of the solve.
-pub const HYST_BANDS: usize = HYST_BANDS_SPAN;
+pub const HYST_BANDS: usize = if HYST_TENTS_BAND > HYST_BANDS_SPAN {
+    HYST_TENTS_BAND
+} else {
+    HYST_BANDS_SPAN
+};
+
+/// Grid intervals between the [`CentreLine::Tent`] split's tents' peaks, and each tent's
+/// half-width (our assumption: the band split's band of four intervals, so the two splits
+/// resolve the centre axis alike and differ only in the density's shape between nodes).
+pub const HYST_TENT_INTERVALS: usize = 4;
+
+/// Tents of the [`CentreLine::Tent`] split: one on every [`HYST_TENT_INTERVALS`]-th node,
+/// the two at the range's ends half tents (so that with equal weights they sum to a uniform
+/// density: a play operator).
+pub const HYST_TENTS_BAND: usize = INTERVALS / HYST_TENT_INTERVALS + 1;
+
+/// Reversible columns: one per band of [`HYST_BANDS_BAND`] ([`rev_col`]).
+pub const HYST_REV_BANDS: usize = HYST_BANDS_BAND;
 
 /// Bands of the [`CentreLine::Band`] (and [`CentreLine::Rise`]) split (our assumption,
 /// measured; 44 grid intervals divide into eleven bands of four). Eleven, as the span split
@@ -166,7 +202,7 @@ pub const HYST_NONNEG_COLS: usize =
 
 /// Columns of the basis: the non-negative ones, then one reversible column per band
 /// ([`rev_col`]).
-pub const HYST_COLS: usize = HYST_NONNEG_COLS + HYST_BANDS;
+pub const HYST_COLS: usize = HYST_NONNEG_COLS + HYST_REV_BANDS;
 
 /// Column index of band `k`'s reversible part (`clamp(u, band) - c_k`: a change of the
 /// reversible slope within the band; sign free).
@@ -281,6 +317,12 @@ pub enum CentreLine {
     /// The band split with the relays below the records on at the start and once-switching
     /// relays above them ([`rise_col`], [`start_memory`]).
     Rise,
+    /// The band split with its relays' centres spread by tents instead of bands: a density
+    /// piecewise linear along the centre axis (module doc, "The tent split").
+    Tent,
+    /// The rise split with tents instead of bands, as [`CentreLine::Tent`] for the band split.
+    #[serde(rename = "rise-tent")]
+    RiseTent,
 }
 
 impl CentreLine {
@@ -288,15 +330,32 @@ impl CentreLine {
     /// [`HYST_BANDS_SPAN`]); the loop columns of the others stay zero.
     pub const fn bands(self) -> usize {
         match self {
+            CentreLine::Tent | CentreLine::RiseTent => HYST_TENTS_BAND,
             CentreLine::Band | CentreLine::Rise => HYST_BANDS_BAND,
             CentreLine::Span => HYST_BANDS_SPAN,
         }
     }
 
+    /// Does this split spread its relays' centres by tents instead of bands?
+    /// [`CentreLine::Tent`] and [`CentreLine::RiseTent`].
+    pub const fn tents(self) -> bool {
+        matches!(self, CentreLine::Tent | CentreLine::RiseTent)
+    }
+
+    /// The same split with tents instead of bands (step 20 of `select`), where it has one:
+    /// the band and rise splits'.
+    pub const fn with_tents(self) -> Option<CentreLine> {
+        match self {
+            CentreLine::Band => Some(CentreLine::Tent),
+            CentreLine::Rise => Some(CentreLine::RiseTent),
+            CentreLine::Span | CentreLine::Tent | CentreLine::RiseTent => None,
+        }
+    }
+
     /// Does this split carry the once-switching columns ([`rise_col`]) and start from the
-    /// memory [`start_memory`] makes? Only [`CentreLine::Rise`].
+    /// memory [`start_memory`] makes? [`CentreLine::Rise`] and [`CentreLine::RiseTent`].
     pub const fn rises(self) -> bool {
-        matches!(self, CentreLine::Rise)
+        matches!(self, CentreLine::Rise | CentreLine::RiseTent)
     }
 
     /// Does this split carry the edge columns ([`edge_col`]) on a range whose margin puts
@@ -320,6 +379,15 @@ impl CentreLine {
                 "each centre band's relays less clamp(u, band), the relays below the records on \
                  at their start and once-switching relays above them: a PI stage's loop whose \
                  first rise no start memory of the band split sets",
+            ),
+            CentreLine::Tent => (
+                "tent",
+                "each centre tent's relays less their memoryless part: a PI stage's loop whose \
+                 density changes smoothly along the range",
+            ),
+            CentreLine::RiseTent => (
+                "rise-tent",
+                "the rise split with each centre tent's relays less their memoryless part",
             ),
             CentreLine::Span => (
                 "span",
@@ -372,6 +440,8 @@ const fn span_inside(i: usize, k: usize, bands: usize) -> bool {
 const _: () = assert!(INTERVALS.is_multiple_of(HYST_BANDS_BAND));
 const _: () = assert!(INTERVALS.is_multiple_of(HYST_BANDS_SPAN));
 const _: () = assert!(HYST_BANDS_BAND <= HYST_BANDS && HYST_BANDS_SPAN <= HYST_BANDS);
+const _: () = assert!(HYST_TENTS_BAND <= HYST_BANDS);
+const _: () = assert!(INTERVALS.is_multiple_of(HYST_TENT_INTERVALS));
 
 /// Grid intervals of the table's range beyond each end of the records' inputs (our
 /// assumption, measured). A relay whose lower threshold lies below the records' lowest input
@@ -552,6 +622,79 @@ fn in_band(u: f64, band: (f64, f64), range: (f64, f64)) -> f64 {
     u.clamp(range.0, range.1).clamp(band.0, band.1) - band.0
 }
 
+/// The relay centres a loop element holds, and their density along the centre axis.
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Centres {
+    /// Every centre in `[lo, hi]`, unit density: a band or a part of one.
+    Flat(f64, f64),
+    /// A tent: unit density at `peak`, falling linearly to zero at `peak +- half`, only the
+    /// centres within `cut`.
+    Hat {
+        peak: f64,
+        half: f64,
+        cut: (f64, f64),
+    },
+}
+
+impl Centres {
+    /// The relay mass with centres in `[x0, x1]`, volts of centre.
+    fn mass(self, x0: f64, x1: f64) -> f64 {
+        match self {
+            Centres::Flat(lo, hi) => (hi.min(x1) - lo.max(x0)).max(0.0),
+            Centres::Hat { peak, half, cut } => hat_mass(x0, x1, peak, half, cut),
+        }
+    }
+
+    /// The whole relay mass.
+    #[cfg(test)]
+    fn total(self) -> f64 {
+        self.mass(f64::NEG_INFINITY, f64::INFINITY)
+    }
+
+    /// The memoryless part of the element's relays at input `u` within `range`: the mass of
+    /// the centres below it (each relay reversible, switching at its centre).
+    fn below(self, u: f64, range: (f64, f64)) -> f64 {
+        self.mass(f64::NEG_INFINITY, u.clamp(range.0, range.1))
+    }
+
+    /// [`Self::below`] as the table holds it: read at the grid's nodes and interpolated
+    /// linearly between them (the table's bilinear interpolation of `f(a) - f(b)` is `f`'s
+    /// node interpolant at `a` less at `b`). The same as [`Self::below`] for a band whose
+    /// edges are nodes; a tent's is quadratic between nodes, and a column that left out the
+    /// exact one would differ from the fitted table's response by the difference.
+    fn below_on_nodes(self, u: f64, range: (f64, f64)) -> f64 {
+        if let Centres::Flat(..) = self {
+            return self.below(u, range);
+        }
+        let step = (range.1 - range.0) / INTERVALS as f64;
+        let x = ((u.clamp(range.0, range.1) - range.0) / step).max(0.0);
+        let i = (x.floor() as usize).min(INTERVALS - 1);
+        let f = x - i as f64;
+        let at = |j: usize| self.below(node_v(range, j), range);
+        (1.0 - f) * at(i) + f * at(i + 1)
+    }
+}
+
+/// The integral over `[x0, x1]` of the hat of unit height at `m`, half-width `h`, cut to
+/// `cut`.
+fn hat_mass(x0: f64, x1: f64, m: f64, h: f64, cut: (f64, f64)) -> f64 {
+    let x0 = x0.max(cut.0).max(m - h);
+    let x1 = x1.min(cut.1).min(m + h);
+    if x1 <= x0 {
+        return 0.0;
+    }
+    // The hat's antiderivative, 0 at m - h.
+    let f = |x: f64| {
+        let d = x - m;
+        if d <= 0.0 {
+            (d + h) * (d + h) / (2.0 * h)
+        } else {
+            h - (h - d) * (h - d) / (2.0 * h)
+        }
+    };
+    f(x1) - f(x0)
+}
+
 /// Column index of (radius `i`, band `k`).
 pub const fn col(i: usize, k: usize) -> usize {
     i * HYST_BANDS + k
@@ -565,14 +708,14 @@ pub const fn col(i: usize, k: usize) -> usize {
 /// near an end of the range still switches within it, so the column stays loop-only there
 /// (unclipped, the relays that would need an input beyond the range never switch and leave
 /// a constant and a ramp in the column that an `offset` then soaks up).
-fn t_rk(a: f64, b: f64, r: f64, band: (f64, f64), range: (f64, f64)) -> f64 {
+fn t_rk(a: f64, b: f64, r: f64, centres: Centres, range: (f64, f64)) -> f64 {
     let from = if b <= range.0 {
         f64::NEG_INFINITY
     } else {
         b + r
     };
     let to = if a >= range.1 { f64::INFINITY } else { a - r };
-    (band.1.min(to) - band.0.max(from)).max(0.0)
+    centres.mass(from, to)
 }
 
 /// The reversible part of the band's relays at `(a, b)`: the length of `[b, a]` inside it.
@@ -600,24 +743,9 @@ fn tent_cut(range: (f64, f64), form: CentreLine) -> (f64, f64) {
 /// The integral over `[x0, x1]` of edge tent `k`: the hat of half-width four grid intervals
 /// centred on node `EDGE_NODE + 4 k`, cut to [`tent_cut`].
 fn edge_tent_integral(x0: f64, x1: f64, k: usize, range: (f64, f64), form: CentreLine) -> f64 {
-    let (lo, hi) = tent_cut(range, form);
     let h = EDGE_TENT_INTERVALS as f64 * (range.1 - range.0) / INTERVALS as f64;
     let m = node_v(range, EDGE_NODE + EDGE_TENT_INTERVALS * k);
-    let x0 = x0.max(lo).max(m - h);
-    let x1 = x1.min(hi).min(m + h);
-    if x1 <= x0 {
-        return 0.0;
-    }
-    // The hat's antiderivative, 0 at m - h.
-    let f = |x: f64| {
-        let d = x - m;
-        if d <= 0.0 {
-            (d + h) * (d + h) / (2.0 * h)
-        } else {
-            h - (h - d) * (h - d) / (2.0 * h)
-        }
-    };
-    f(x1) - f(x0)
+    hat_mass(x0, x1, m, h, tent_cut(range, form))
 }
 
 /// The relay mass of edge tent `k` of split `form` (its integral over [`tent_cut`]), input
@@ -767,8 +895,8 @@ pub fn columns(
             table_column(&e, range, &start, u_v, &path, rows, |_| on, &mut out[at]);
         }
     }
-    for k in 0..HYST_BANDS {
-        let band = band_v(range, k, HYST_BANDS);
+    for k in 0..HYST_REV_BANDS {
+        let band = band_v(range, k, HYST_REV_BANDS);
         out[rev_col(k)] = rows
             .iter()
             .map(|&row| in_band(u_v[row], band, range))
@@ -789,13 +917,15 @@ const CENTRE_POINTS_PER_INTERVAL: usize = 8;
 fn element(
     range: (f64, f64),
     i: usize,
-    centres: (f64, f64),
+    centres: Centres,
     form: CentreLine,
 ) -> (Vec<f32>, Box<dyn Fn(f64) -> f64>) {
     let r = radius_v(range, i);
     let e = grid(range, |a, b| t_rk(a, b, r, centres, range));
     let rev: Box<dyn Fn(f64) -> f64> = match form {
-        CentreLine::Band | CentreLine::Rise => Box::new(move |u: f64| in_band(u, centres, range)),
+        CentreLine::Band | CentreLine::Rise | CentreLine::Tent | CentreLine::RiseTent => {
+            Box::new(move |u: f64| centres.below_on_nodes(u, range))
+        }
         CentreLine::Span => centre_line(&e, range),
     };
     (e, rev)
@@ -816,36 +946,47 @@ fn span_v(range: (f64, f64)) -> (f64, f64) {
 /// The relay centres of loop element (radius `i`, band `k`): the band's, and for the
 /// [`CentreLine::Span`] split only those inside the span's triangle (both thresholds within
 /// the records' span, `lo + r <= c <= hi - r`; empty where [`span_inside`] is false).
-fn element_centres(range: (f64, f64), i: usize, k: usize, form: CentreLine) -> (f64, f64) {
-    let band = band_v(range, k, form.bands());
-    if !form.edges() {
-        return band;
+fn element_centres(range: (f64, f64), i: usize, k: usize, form: CentreLine) -> Centres {
+    // The centres this split may hold: the range's, or the span's triangle's.
+    let cut = if form.edges() {
+        let r = radius_v(range, i);
+        let (lo, hi) = span_v(range);
+        (lo + r, (hi - r).max(lo + r))
+    } else {
+        range
+    };
+    if form.tents() {
+        let step = (range.1 - range.0) / INTERVALS as f64;
+        return Centres::Hat {
+            peak: node_v(range, k * HYST_TENT_INTERVALS),
+            half: HYST_TENT_INTERVALS as f64 * step,
+            cut,
+        };
     }
-    let r = radius_v(range, i);
-    let (lo, hi) = span_v(range);
-    let c0 = band.0.max(lo + r);
-    (c0, band.1.min(hi - r).max(c0))
+    let band = band_v(range, k, form.bands());
+    let c0 = band.0.max(cut.0);
+    Centres::Flat(c0, band.1.min(cut.1).max(c0))
 }
 
 /// The relay centres of radius `i` outside the span's triangle ([`out_col`]): below
 /// `lo + r` (a lower threshold below the records' lowest input), or else above `hi - r` (an
 /// upper threshold above their highest), within the table's range. With the triangle's
 /// elements they cover the range once.
-fn out_centres(range: (f64, f64), i: usize, top: bool) -> (f64, f64) {
+fn out_centres(range: (f64, f64), i: usize, top: bool) -> Centres {
     let r = radius_v(range, i);
     let (lo, hi) = span_v(range);
     let split = lo + r;
     if top {
-        ((hi - r).max(split), range.1)
+        Centres::Flat((hi - r).max(split), range.1)
     } else {
-        (range.0, split)
+        Centres::Flat(range.0, split)
     }
 }
 
 /// The loop elements split `form` fits ([`CentreLine::fits`]): column, radius index and
 /// relay centres of each.
-fn loop_elements(range: (f64, f64), form: CentreLine) -> Vec<(usize, usize, (f64, f64))> {
-    let mut out: Vec<(usize, usize, (f64, f64))> = (0..HYST_RADII)
+fn loop_elements(range: (f64, f64), form: CentreLine) -> Vec<(usize, usize, Centres)> {
+    let mut out: Vec<(usize, usize, Centres)> = (0..HYST_RADII)
         .flat_map(|i| (0..form.bands()).map(move |k| (i, k)))
         .filter(|&(i, k)| form.fits(col(i, k)))
         .map(|(i, k)| (col(i, k), i, element_centres(range, i, k, form)))
@@ -1065,8 +1206,8 @@ impl HystFit {
     /// `E(a, b) = g (a - b) + sum_k s_k |[b, a] ^ band_k| + sum_rk m_rk (T_rk - |[b, a] ^ band_k|)`.
     pub fn grid_v(&self, static_gain: f64) -> Vec<f32> {
         let range = self.range;
-        let rev_bands: Vec<(f64, f64)> = (0..HYST_BANDS)
-            .map(|k| band_v(range, k, HYST_BANDS))
+        let rev_bands: Vec<(f64, f64)> = (0..HYST_REV_BANDS)
+            .map(|k| band_v(range, k, HYST_REV_BANDS))
             .collect();
         let mut e: Vec<f64> = grid(range, |a, b| {
             let mut v = static_gain * (a - b);
@@ -1151,7 +1292,13 @@ mod tests {
     /// model) to f32 rounding: the basis and the table are one representation.
     #[test]
     fn the_table_reproduces_the_weighted_columns() {
-        for form in [CentreLine::Band, CentreLine::Span, CentreLine::Rise] {
+        for form in [
+            CentreLine::Band,
+            CentreLine::Span,
+            CentreLine::Rise,
+            CentreLine::Tent,
+            CentreLine::RiseTent,
+        ] {
             reproduces(form);
         }
     }
@@ -1214,9 +1361,9 @@ mod tests {
         );
         // And the loop is really there: the columns are not all flat (a band-limited play
         // swings by its band's width when its radius is wider).
-        let band = band_v(range, 3, form.bands());
+        let mass = element_centres(range, 9, 3, form).total();
         let swing = cols[col(9, 3)].iter().fold(0.0f64, |m, v| m.max(v.abs()));
-        assert!(swing > 0.5 * (band.1 - band.0), "column swing {swing}");
+        assert!(swing > 0.5 * mass, "column swing {swing} of {mass}");
         let swing = cols[edge_col(false, 1)]
             .iter()
             .fold(0.0f64, |m, v| m.max(v.abs()));
@@ -1417,15 +1564,15 @@ mod tests {
     #[test]
     fn the_span_split_cuts_the_bands_along_the_triangle() {
         for range in [(-0.5, 10.5), (1.3, 4.1), (-2.0, 9.0)] {
-            let per = |centres: (f64, f64)| centres.1 - centres.0;
+            let per = |centres: Centres| centres.total();
             for i in 0..HYST_RADII {
                 let r = radius_v(range, i);
-                let mut parts: Vec<(f64, f64)> = (0..HYST_BANDS_SPAN)
+                let mut parts: Vec<Centres> = (0..CentreLine::Span.bands())
                     .map(|k| element_centres(range, i, k, CentreLine::Span))
                     .collect();
                 for (k, &part) in parts.iter().enumerate() {
                     let inside = per(part) > 1e-9 * (range.1 - range.0);
-                    let told = span_inside(i, k, HYST_BANDS_SPAN);
+                    let told = span_inside(i, k, CentreLine::Span.bands());
                     assert_eq!(told, inside, "{range:?} radius {i} band {k}");
                 }
                 parts.push(out_centres(range, i, false));
@@ -1440,7 +1587,10 @@ mod tests {
                         let (a, b) = (node_v(range, a_i), node_v(range, b_i));
                         let cut: f64 = parts.iter().map(|&c| t_rk(a, b, r, c, range)).sum();
                         let bands: f64 = (0..HYST_BANDS_SPAN)
-                            .map(|k| t_rk(a, b, r, band_v(range, k, HYST_BANDS_SPAN), range))
+                            .map(|k| {
+                                let band = band_v(range, k, HYST_BANDS_SPAN);
+                                t_rk(a, b, r, Centres::Flat(band.0, band.1), range)
+                            })
                             .sum();
                         assert!(
                             (cut - bands).abs() < 1e-9,
