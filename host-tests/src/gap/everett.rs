@@ -659,9 +659,11 @@ impl Centres {
 
     /// [`Self::below`] as the table holds it: read at the grid's nodes and interpolated
     /// linearly between them (the table's bilinear interpolation of `f(a) - f(b)` is `f`'s
-    /// node interpolant at `a` less at `b`). The same as [`Self::below`] for a band whose
-    /// edges are nodes; a tent's is quadratic between nodes, and a column that left out the
-    /// exact one would differ from the fitted table's response by the difference.
+    /// node interpolant at `a` less at `b`). A band whose edges are nodes is linear between
+    /// them, so [`Self::below`] itself is returned (the band splits' columns as they were, to
+    /// the last bit: an interpolated form moved families case 3384 onto another path); a
+    /// tent's is quadratic between nodes, and a column that left out the exact one would
+    /// differ from the fitted table's response by the difference.
     fn below_on_nodes(self, u: f64, range: (f64, f64)) -> f64 {
         if let Centres::Flat(..) = self {
             return self.below(u, range);
@@ -1554,6 +1556,57 @@ mod tests {
                 over,
                 "seed {seed}: an invalid fit passed"
             );
+        }
+    }
+
+    /// The tent split's relays are the band split's, spread otherwise: for every radius its
+    /// tents with equal weights hold each centre of the range once (their masses over any
+    /// interval sum to its length, so the tent split holds a play operator as the band split
+    /// does), each tent is a hat (its density at the peak node 1 and half way to the next 1/2),
+    /// and its memoryless part, read as the table reads it, agrees with the exact mass on the
+    /// nodes and lies within the hat's curvature between them.
+    #[test]
+    fn the_tents_hold_each_centre_once_and_are_hats() {
+        for range in [(-0.5, 10.5), (1.3, 4.1), (-2.0, 9.0)] {
+            let step = (range.1 - range.0) / INTERVALS as f64;
+            for form in [CentreLine::Tent, CentreLine::RiseTent] {
+                let tents: Vec<Centres> = (0..form.bands())
+                    .map(|k| element_centres(range, 3, k, form))
+                    .collect();
+                for (x0, x1) in [
+                    (range.0, range.1),
+                    (range.0 + 0.37 * step, range.0 + 9.81 * step),
+                    (range.0 + 17.2 * step, range.0 + 17.9 * step),
+                ] {
+                    let sum: f64 = tents.iter().map(|t| t.mass(x0, x1)).sum();
+                    assert!(
+                        (sum - (x1 - x0)).abs() < 1e-9 * (range.1 - range.0),
+                        "{range:?} {form:?} [{x0}, {x1}]: {sum}"
+                    );
+                }
+                // Tent 2 peaks on node 8: density 1 there, 1/2 two nodes away.
+                let density = |x: f64| (tents[2].mass(x - 1e-6, x + 1e-6)) / 2e-6;
+                let peak = node_v(range, 2 * HYST_TENT_INTERVALS);
+                assert!((density(peak) - 1.0).abs() < 1e-4);
+                assert!((density(peak + 2.0 * step) - 0.5).abs() < 1e-4);
+                assert!((density(peak - 2.0 * step) - 0.5).abs() < 1e-4);
+                assert!(density(peak + 4.5 * step).abs() < 1e-4);
+                for j in 0..=INTERVALS {
+                    let u = node_v(range, j);
+                    let exact = tents[2].below(u, range);
+                    assert!((tents[2].below_on_nodes(u, range) - exact).abs() < 1e-12);
+                    // Between nodes the chord of a curve whose second derivative is at most
+                    // 1 / half-width: within step^2 / (8 half).
+                    if j < INTERVALS {
+                        let mid = u + 0.5 * step;
+                        let err = (tents[2].below_on_nodes(mid, range)
+                            - tents[2].below(mid, range))
+                        .abs();
+                        let half = HYST_TENT_INTERVALS as f64 * step;
+                        assert!(err <= step * step / (8.0 * half) + 1e-12, "node {j}: {err}");
+                    }
+                }
+            }
         }
     }
 
