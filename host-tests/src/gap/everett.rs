@@ -616,12 +616,6 @@ fn band_v(range: (f64, f64), k: usize, bands: usize) -> (f64, f64) {
     (node_v(range, k * per), node_v(range, (k + 1) * per))
 }
 
-/// How far into `band` the input `u` (held within the table's `range`) lies, volts: a band's
-/// reversible part.
-fn in_band(u: f64, band: (f64, f64), range: (f64, f64)) -> f64 {
-    u.clamp(range.0, range.1).clamp(band.0, band.1) - band.0
-}
-
 /// The relay centres a loop element holds, and their density along the centre axis.
 #[derive(Clone, Copy, Debug, PartialEq)]
 enum Centres {
@@ -718,11 +712,6 @@ fn t_rk(a: f64, b: f64, r: f64, centres: Centres, range: (f64, f64)) -> f64 {
     };
     let to = if a >= range.1 { f64::INFINITY } else { a - r };
     centres.mass(from, to)
-}
-
-/// The reversible part of the band's relays at `(a, b)`: the length of `[b, a]` inside it.
-fn l_k(a: f64, b: f64, band: (f64, f64)) -> f64 {
-    (band.1.min(a) - band.0.max(b)).max(0.0)
 }
 
 /// Where the tents of split `form` spread their relays' free thresholds: the span `[node
@@ -901,7 +890,7 @@ pub fn columns(
         let band = band_v(range, k, HYST_REV_BANDS);
         out[rev_col(k)] = rows
             .iter()
-            .map(|&row| in_band(u_v[row], band, range))
+            .map(|&row| Centres::Flat(band.0, band.1).below(u_v[row], range))
             .collect();
     }
     out
@@ -1214,7 +1203,7 @@ impl HystFit {
         let mut e: Vec<f64> = grid(range, |a, b| {
             let mut v = static_gain * (a - b);
             for (k, band) in rev_bands.iter().enumerate() {
-                v += self.weights[rev_col(k)] * l_k(a, b, *band);
+                v += self.weights[rev_col(k)] * Centres::Flat(band.0, band.1).mass(b, a);
             }
             for top in [false, true] {
                 for k in 0..EDGE_TENTS {

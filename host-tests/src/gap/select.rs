@@ -208,12 +208,13 @@ impl CentreChoice {
     /// split's figure where it was fitted, else the band split's).
     fn noise_var(&self, form: CentreLine) -> f64 {
         match form {
-            CentreLine::Band => self.band_noise_var,
+            // (the tent splits are never chosen here: step 20 refines the band and rise splits'
+            // tables with them)
+            CentreLine::Band | CentreLine::Tent => self.band_noise_var,
             CentreLine::Span => self.span_noise_var,
-            CentreLine::Rise => self.rise_noise_var.unwrap_or(self.band_noise_var),
-            // (never chosen here: step 20 refines the band and rise splits' tables with them)
-            CentreLine::Tent => self.band_noise_var,
-            CentreLine::RiseTent => self.rise_noise_var.unwrap_or(self.band_noise_var),
+            CentreLine::Rise | CentreLine::RiseTent => {
+                self.rise_noise_var.unwrap_or(self.band_noise_var)
+            }
         }
     }
 }
@@ -239,7 +240,7 @@ impl Diagnosis {
     /// The final residual as the split choice measures it: the sum over records of the mean
     /// square over the record's noise variance `var`.
     fn final_noise_var(&self, var: &[f64]) -> f64 {
-        self.final_mse().iter().zip(var).map(|(m, v)| m / v).sum()
+        in_noise_vars(&self.final_mse(), var)
     }
 
     /// The JSON object of `piezo gap --json`. `unexplained` is always there: `null` when every
@@ -350,6 +351,11 @@ fn set_score(data: &[Data], ms: &[f64], set: &[String]) -> f64 {
             .map(|e| catalogue::param_count(e) as f64)
             .sum::<f64>()
             * n_all.ln()
+}
+
+/// The records' mean squares `mse` summed in their noise variances `var`.
+fn in_noise_vars(mse: &[f64], var: &[f64]) -> f64 {
+    mse.iter().zip(var).map(|(m, v)| m / v).sum()
 }
 
 /// No record's residual power grows (beyond 0.1 %, rounding): the score is dominated by the
@@ -658,7 +664,7 @@ fn centre_line_fit(
         }
         let m = read_back(m, scale);
         let (sims, mse) = simulate_all(&m, data).ok()?;
-        let cost = mse.iter().zip(var).map(|(m, v)| m / v).sum::<f64>();
+        let cost = in_noise_vars(&mse, var);
         cost.is_finite().then_some((m, sims, cost))
     };
     let (lo, hi) = CENTRE_SCALES;
@@ -3444,12 +3450,11 @@ fn diagnose_split(
     // were settled on the bands). Not after step 13a: the offset it read from the table's
     // level at the start would be refitted with the tents' table, which takes the constant
     // (issue #12's single sine, seed 22: 20.0 mV for the truth's 21.3 mV became 2.2 mV,
-    // `single_sine_record_names_hysteresis_and_its_start`). Where step 19 then finds no centre line on the tents' table
-    // but finds one on the bands' that ends lower, the bands' table and step 19 stand instead
-    // (families cases 3163 and 3260, a Bouc-Wen loop and a sensor scale: the tents' refit took
+    // `single_sine_record_names_hysteresis_and_its_start`). Where step 19 then finds no
+    // centre line on the tents' table but finds one on the bands' that ends lower, the bands'
+    // table and step 19 stand instead (families cases 3163 and 3260, a Bouc-Wen loop and a sensor scale: the tents' refit took
     // part of the centre line's work, step 19 then explained too little to fold, and the pair
     // went unreported at a higher final residual).
-    let total_var = |v: &[f64]| v.iter().zip(&var).map(|(m, v)| m / v).sum::<f64>();
     // (the model, simulations, mean squares and regressors before the tents, and the step
     // count then)
     type BeforeTents = (ModelFile, Vec<Vec<f64>>, Vec<f64>, SlowRegressors, usize);
@@ -3466,7 +3471,9 @@ fn diagnose_split(
             Some(f) => (f.model, f.sims, f.mse, f.slow_x),
             None => (m, s, ms, tent_x),
         };
-        if total_var(&ms) < total_var(&cur_mse) && no_record_worse(&ms, &cur_mse) {
+        if in_noise_vars(&ms, &var) < in_noise_vars(&cur_mse, &var)
+            && no_record_worse(&ms, &cur_mse)
+        {
             let why = format!(
                 "the table's density between its bands: the {} split (the same relays, a \
                  density linear between the bands' centres instead of constant across each \
@@ -3582,7 +3589,7 @@ fn diagnose_split(
     if centred.is_none()
         && let Some((m0, s0, ms0, x0, at)) = before_tents
         && let Some(r) = centre_step(&m0, &ms0, &x0)
-        && total_var(&r.2) < total_var(&cur_mse)
+        && in_noise_vars(&r.2, &var) < in_noise_vars(&cur_mse, &var)
     {
         steps.truncate(at);
         model = m0;
