@@ -48,7 +48,7 @@
 
 use super::catalogue;
 use super::data::{Data, simulate_all};
-use crate::io::model_file::{ModelFile, OffsetSection};
+use crate::io::model_file::{ModelFile, OffsetSection, SensorGainSection};
 use crate::util::par_map;
 use model_core::gain::POLY_TERMS;
 use nalgebra::{DMatrix, DVector};
@@ -378,6 +378,40 @@ pub fn curvature_in_offsets_place(
     let mut start = model.clone();
     start.offset = None;
     let (model, sims, mse) = fit_curvature(&start, order, false, scaled, data)?;
+    let scale = model.sensor_gain.as_ref().map_or(1.0, |g| g.gain);
+    Some(CurvatureFit::new(model, sims, mse, scale, order))
+}
+
+/// `model` without its `[offset]`, a `[sensor-gain]` fitted in its place and K'(u) refitted
+/// to `order`: the mirror of [`InPlace::Offset`] (a scale in an offset's place, like for
+/// like beside the same curvature; `select`, step 14 (d)). Where `named` holds `offset` and
+/// `nonlinear-gain` and neither a `sensor-gain`, a `hysteresis` (a table's constant is step
+/// 13's) nor a `drift` (a creep's start is step 12's); `None` otherwise, or where no fit
+/// simulates. The fit's `scale` is the scale fitted.
+pub fn scale_in_offsets_place(
+    model: &ModelFile,
+    named: &[String],
+    data: &[Data],
+    order: usize,
+) -> Option<CurvatureFit> {
+    let has = |e: &str| named.iter().any(|n| n == e);
+    if !has("offset")
+        || !has("nonlinear-gain")
+        || has("sensor-gain")
+        || has("hysteresis")
+        || has("drift")
+        || catalogue::present(model, "hysteresis")
+        || catalogue::present(model, "drift")
+        || model.sensor_gain.is_some()
+    {
+        return None;
+    }
+    model.offset.as_ref()?;
+    model.nonlinear_gain.as_ref()?;
+    let mut start = model.clone();
+    start.offset = None;
+    start.sensor_gain = Some(SensorGainSection { gain: 1.0 });
+    let (model, sims, mse) = fit_curvature(&start, order, false, true, data)?;
     let scale = model.sensor_gain.as_ref().map_or(1.0, |g| g.gain);
     Some(CurvatureFit::new(model, sims, mse, scale, order))
 }
