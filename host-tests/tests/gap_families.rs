@@ -714,7 +714,9 @@ fn suite_meets([exact_pct, false_pct, cut_pct, said_pct]: [f64; 4], rates: bool,
 /// reported rather than named. Session 52, over the 600 seeds 3100-3699 (3500-3699 held out):
 /// 85.2 % exact, 12 false names of 643 (1.9 %; 1 of 215 on 3500-3699); of the 89 misses, 32
 /// are loops whose branches run backwards (no Everett table follows them) and 23 a loop
-/// beside a static shape on records without holds (GAP.md, session 52, by class).
+/// beside a static shape on records without holds (GAP.md, session 52, by class). Session 58:
+/// 86.0 % exact, 7 false names of 643 (1.1 %), 95.7 % exact or honest (a scale beside a
+/// curvature no longer named as an offset: GAP.md, step 14 (d)).
 #[test]
 #[ignore = "issue #12: workflow does not yet meet this on all families"]
 fn randomised_families_are_named() {
@@ -1300,7 +1302,8 @@ fn a_stage_parked_after_a_scan_elsewhere_is_fitted_from_there() {
 /// once named with a false 0.2 % scale, is named alone, its K'(u) with a cubic term, the
 /// scale's removal said in a step and the pair reported; an exp curvature with a 20 mV offset
 /// on a long sine (seed 1222), once named with a false 1.8 % scale in the offset's place, is
-/// named with the offset swapped in, and both end within 1.5x the floor; step 14 (c) on a
+/// named with the offset (swapped in by step 14 (b) until session 58; since, the final check
+/// takes the scale out first), and both end within 1.5x the floor; step 14 (c) on a
 /// third (seed 1593, below), and the orders above the cubic on a fourth (seed 2577, below).
 #[test]
 fn a_scale_beside_a_curvature_gives_way_to_its_cubic_or_to_an_offset() {
@@ -1331,9 +1334,14 @@ fn a_scale_beside_a_curvature_gives_way_to_its_cubic_or_to_an_offset() {
     named.sort();
     assert_eq!(named, ["nonlinear-gain", "offset"], "{}", d.table());
     assert!(d.model.sensor_gain.is_none());
-    assert!(d.steps.iter().any(|s| s.effect == "offset"
-        && !s.removed
-        && s.evidence.starts_with("swapped in for sensor-gain")));
+    // (since session 58 the final check takes the scale out first, its removal leaving less
+    // above the floor, where it took the offset out first as a level the residual did not
+    // show and step 14 (b) swapped it back in for the scale: either way a step says the
+    // scale went)
+    assert!(d.steps.iter().any(|s| {
+        (s.effect == "offset" && !s.removed && s.evidence.starts_with("swapped in for sensor-gain"))
+            || (s.effect == "sensor-gain" && s.removed)
+    }));
     // (no pair left that names the scale)
     assert!(
         d.cannot_tell

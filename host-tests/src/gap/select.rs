@@ -2357,7 +2357,13 @@ fn diagnose_split(
                             model.offset.as_ref().map_or(0.0, |o| o.offset_v),
                             sigs.level_v,
                         ));
-                        return (e, m, s, ms, 0.0);
+                        // (judged as one whose removal grows nothing: below its bar whatever
+                        // the growth, but after an effect whose removal leaves the records
+                        // as they are, whose refit may be what took the level up; families
+                        // case 3280: a scale and an offset named beside a curvature that
+                        // came first and did nothing after them, the offset taken out as
+                        // unshown and the curvature left in the scale's place)
+                        return (e, m, s, ms, 1.0);
                     }
                     if sigs.shows_offset_at_rest(&model) {
                         return (e, m, s, ms, f64::INFINITY);
