@@ -350,6 +350,21 @@ fn gauss_newton(
     Some((at(&p), sims, mse))
 }
 
+/// Step 14 (c) and (d)'s case: `named` holds `offset` and `nonlinear-gain` and the model
+/// has both, and neither a `hysteresis` (a table's constant is step 13's) nor a `drift` (a
+/// creep's start is step 12's) is named or in the model.
+fn offset_beside_curvature_alone(model: &ModelFile, named: &[String]) -> bool {
+    let has = |e: &str| named.iter().any(|n| n == e);
+    has("offset")
+        && has("nonlinear-gain")
+        && !has("hysteresis")
+        && !has("drift")
+        && !catalogue::present(model, "hysteresis")
+        && !catalogue::present(model, "drift")
+        && model.offset.is_some()
+        && model.nonlinear_gain.is_some()
+}
+
 /// `model` without its `[offset]`, K'(u) refitted to `order` (and the scale, where one is
 /// named): an offset beside a curvature that a curvature of higher order may do without
 /// (`select`, step 14 (c)). Where `named` holds `offset` and `nonlinear-gain` and neither a
@@ -362,18 +377,10 @@ pub fn curvature_in_offsets_place(
     data: &[Data],
     order: usize,
 ) -> Option<CurvatureFit> {
-    let has = |e: &str| named.iter().any(|n| n == e);
-    if !has("offset")
-        || !has("nonlinear-gain")
-        || has("hysteresis")
-        || has("drift")
-        || catalogue::present(model, "hysteresis")
-        || catalogue::present(model, "drift")
-    {
+    if !offset_beside_curvature_alone(model, named) {
         return None;
     }
-    model.offset.as_ref()?;
-    model.nonlinear_gain.as_ref()?;
+    let has = |e: &str| named.iter().any(|n| n == e);
     let scaled = has("sensor-gain") && model.sensor_gain.is_some();
     let mut start = model.clone();
     start.offset = None;
@@ -394,20 +401,12 @@ pub fn scale_in_offsets_place(
     data: &[Data],
     order: usize,
 ) -> Option<CurvatureFit> {
-    let has = |e: &str| named.iter().any(|n| n == e);
-    if !has("offset")
-        || !has("nonlinear-gain")
-        || has("sensor-gain")
-        || has("hysteresis")
-        || has("drift")
-        || catalogue::present(model, "hysteresis")
-        || catalogue::present(model, "drift")
+    if !offset_beside_curvature_alone(model, named)
+        || named.iter().any(|n| n == "sensor-gain")
         || model.sensor_gain.is_some()
     {
         return None;
     }
-    model.offset.as_ref()?;
-    model.nonlinear_gain.as_ref()?;
     let mut start = model.clone();
     start.offset = None;
     start.sensor_gain = Some(SensorGainSection { gain: 1.0 });

@@ -1200,6 +1200,62 @@ fn curvature_takes_up(
     (w.model, w.sims, w.mse)
 }
 
+/// Step 14 (b) and (d)'s bookkeeping: `into` (an offset or a scale, `w` beside the cubic,
+/// `what` in words) takes the place of `out` (`v` beside the same cubic, like for like), a
+/// step `into` saying so; where `out` leaves no more than the look-alike bar above `w` in
+/// every record (`var`), the pair `into` / `out` is reported in place of any pair that
+/// named `out`. The model, its simulations and mean squares to go on with.
+fn like_for_like_swap(
+    (out, into, what): (&str, &str, String),
+    (w, v): (scale_order::CurvatureFit, &[f64]),
+    (var, cur_mse): (&[f64], &[f64]),
+    (steps, ambiguous, named): (&mut Vec<Step>, &mut Vec<CannotTell>, &mut Vec<String>),
+) -> (ModelFile, Vec<Vec<f64>>, Vec<f64>) {
+    let told = !leaves_within_of(v, &w.mse, var, STATIC_TELL_RATIO);
+    let rival = if out == "offset" { "offset" } else { "scale" };
+    let evidence = format!(
+        "swapped in for {out}: beside a curvature of one more order (c3 = {:.3e} per V^3), \
+         {what} leaves {:.2} mV against the {rival}'s {:.2} mV (refitted beside the same \
+         curvature), less in every record{}",
+        w.top_term,
+        1e3 * rms_of(&w.mse),
+        1e3 * rms_of(v),
+        if told {
+            ""
+        } else {
+            ", but by less than the look-alike bar: the records cannot tell the two; \
+             records that start at rest at 0 V read the sensor's zero"
+        }
+    );
+    let mut params = params_json(&w.model, into);
+    params.extend(params_json(&w.model, "nonlinear-gain"));
+    steps.push(Step {
+        params,
+        ..Step::new(
+            into.into(),
+            evidence.clone(),
+            cur_mse,
+            &w.mse,
+            w.sims.clone(),
+        )
+    });
+    ambiguous.retain(|k| k.neither_named || k.named != out);
+    if !told {
+        ambiguous.push(CannotTell {
+            named: into.into(),
+            alternative: out.into(),
+            neither_named: false,
+            taken_out: TakenOut::No,
+            rms_v: rms_of(&w.mse),
+            alternative_rms_v: rms_of(v),
+            why: evidence,
+        });
+    }
+    named.retain(|n| n != out);
+    named.push(into.into());
+    (w.model, w.sims, w.mse)
+}
+
 /// The opening words of the note a diagnosis gives where a table is named and the records
 /// hold no reading of the sensor's zero (no rest at 0 V at a record's start, no input down to
 /// the table's low end): a sensor offset is then not told from the table's constant. A note
@@ -3213,52 +3269,14 @@ fn diagnose_split(
         // less in every record is the likelier, and takes the scale's place; where the scale
         // leaves no more than the look-alike bar above it in any record, the records cannot
         // tell the two, and the pair is reported.
-        let told = !leaves_within_of(&v.mse, &w.mse, &var, STATIC_TELL_RATIO);
         let offset_v = w.model.offset.as_ref().map_or(0.0, |o| o.offset_v);
-        let evidence = format!(
-            "swapped in for sensor-gain: beside a curvature of one more order (c3 = {:.3e} per \
-             V^3), an offset of {:.1} mV in the scale's place leaves {:.2} mV against the \
-             scale's {:.2} mV (refitted beside the same curvature), less in every record{}",
-            w.top_term,
-            1e3 * offset_v,
-            1e3 * rms_of(&w.mse),
-            1e3 * rms_of(&v.mse),
-            if told {
-                ""
-            } else {
-                ", but by less than the look-alike bar: the records cannot tell the two; \
-                 records that start at rest at 0 V read the sensor's zero"
-            }
+        let what = format!("an offset of {:.1} mV in the scale's place", 1e3 * offset_v);
+        (model, sims, cur_mse) = like_for_like_swap(
+            ("sensor-gain", "offset", what),
+            (w, &v.mse),
+            (&var, &cur_mse),
+            (&mut steps, &mut ambiguous, &mut named),
         );
-        let mut params = params_json(&w.model, "offset");
-        params.extend(params_json(&w.model, "nonlinear-gain"));
-        steps.push(Step {
-            params,
-            ..Step::new(
-                "offset".into(),
-                evidence.clone(),
-                &cur_mse,
-                &w.mse,
-                w.sims.clone(),
-            )
-        });
-        ambiguous.retain(|k| k.neither_named || k.named != "sensor-gain");
-        if !told {
-            ambiguous.push(CannotTell {
-                named: "offset".into(),
-                alternative: "sensor-gain".into(),
-                neither_named: false,
-                taken_out: TakenOut::No,
-                rms_v: rms_of(&w.mse),
-                alternative_rms_v: rms_of(&v.mse),
-                why: evidence,
-            });
-        }
-        named.retain(|n| n != "sensor-gain");
-        named.push("offset".into());
-        model = w.model;
-        sims = w.sims;
-        cur_mse = w.mse;
     }
     // Step 14 (c): an offset beside a curvature that a curvature of higher order does
     // without, by the same one-sided bars and orders, is a part of the curvature's shape over
@@ -3310,54 +3328,18 @@ fn diagnose_split(
     ) && w.mse.iter().zip(&v.mse).all(|(a, b)| a < b)
         && no_record_worse(&w.mse, &cur_mse)
     {
-        let told = !leaves_within_of(&v.mse, &w.mse, &var, STATIC_TELL_RATIO);
         let offset_v = model.offset.as_ref().map_or(0.0, |o| o.offset_v);
-        let evidence = format!(
-            "swapped in for offset: beside a curvature of one more order (c3 = {:.3e} per \
-             V^3), a scale of {:.4} in the place of the offset of {:.1} mV leaves {:.2} mV \
-             against the offset's {:.2} mV (refitted beside the same curvature), less in every \
-             record{}",
-            w.top_term,
+        let what = format!(
+            "a scale of {:.4} in the place of the offset of {:.1} mV",
             w.scale,
-            1e3 * offset_v,
-            1e3 * rms_of(&w.mse),
-            1e3 * rms_of(&v.mse),
-            if told {
-                ""
-            } else {
-                ", but by less than the look-alike bar: the records cannot tell the two; \
-                 records that start at rest at 0 V read the sensor's zero"
-            }
+            1e3 * offset_v
         );
-        let mut params = params_json(&w.model, "sensor-gain");
-        params.extend(params_json(&w.model, "nonlinear-gain"));
-        steps.push(Step {
-            params,
-            ..Step::new(
-                "sensor-gain".into(),
-                evidence.clone(),
-                &cur_mse,
-                &w.mse,
-                w.sims.clone(),
-            )
-        });
-        ambiguous.retain(|k| k.neither_named || k.named != "offset");
-        if !told {
-            ambiguous.push(CannotTell {
-                named: "sensor-gain".into(),
-                alternative: "offset".into(),
-                neither_named: false,
-                taken_out: TakenOut::No,
-                rms_v: rms_of(&w.mse),
-                alternative_rms_v: rms_of(&v.mse),
-                why: evidence,
-            });
-        }
-        named.retain(|n| n != "offset");
-        named.push("sensor-gain".into());
-        model = w.model;
-        sims = w.sims;
-        cur_mse = w.mse;
+        (model, sims, cur_mse) = like_for_like_swap(
+            ("offset", "sensor-gain", what),
+            (w, &v.mse),
+            (&var, &cur_mse),
+            (&mut steps, &mut ambiguous, &mut named),
+        );
     }
     let mut cannot_tell = cannot_tell(&model, base, &named, data, &slow_x, u_range, &cur_mse);
     // A pair left unnamed at one step whose shape a later step named (told apart then, by the
