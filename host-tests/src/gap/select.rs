@@ -364,6 +364,12 @@ fn no_record_worse(ms: &[f64], cur_mse: &[f64]) -> bool {
     ms.iter().zip(cur_mse).all(|(a, b)| *a <= *b * 1.001)
 }
 
+/// Does `ms` leave strictly less than `other` in every record (the like-for-like tests of
+/// step 14 (b) and (d))?
+fn less_in_every_record(ms: &[f64], other: &[f64]) -> bool {
+    ms.iter().zip(other).all(|(a, b)| a < b)
+}
+
 /// An offset fitted in the place of the table's constant at rest at 0 V
 /// ([`rest_reading`]).
 struct RestReading {
@@ -3219,7 +3225,7 @@ fn diagnose_split(
             InPlace::Scale,
             scale_order::CUBIC,
         )?;
-        (w.mse.iter().zip(&v.mse).all(|(a, b)| a < b) && no_record_worse(&w.mse, &cur_mse))
+        (less_in_every_record(&w.mse, &v.mse) && no_record_worse(&w.mse, &cur_mse))
             .then_some((w, v))
     };
     let higher = curvature_in_place_of(
@@ -3232,7 +3238,7 @@ fn diagnose_split(
     );
     let (higher, swap) = match higher {
         Some((w, rival)) if w.order > scale_order::CUBIC => match swap() {
-            Some((o, v)) if o.mse.iter().zip(&w.mse).all(|(a, b)| a < b) => (None, Some((o, v))),
+            Some((o, v)) if less_in_every_record(&o.mse, &w.mse) => (None, Some((o, v))),
             _ => (Some((w, rival)), None),
         },
         Some(h) => (Some(h), None),
@@ -3325,7 +3331,7 @@ fn diagnose_split(
     if let (Some(w), Some(v)) = (
         scale_order::scale_in_offsets_place(&model, &named, data, scale_order::CUBIC),
         scale_order::refit_order(&model, &named, data, scale_order::CUBIC),
-    ) && w.mse.iter().zip(&v.mse).all(|(a, b)| a < b)
+    ) && less_in_every_record(&w.mse, &v.mse)
         && no_record_worse(&w.mse, &cur_mse)
     {
         let offset_v = model.offset.as_ref().map_or(0.0, |o| o.offset_v);
