@@ -97,6 +97,22 @@
 //! every diagnosis the tents fitted the planes closer but named a false `offset` beside the
 //! four Bouc-Wen loops with a resonance of the hidden-effect suite (GAP.md, session 57).
 //!
+//! # The own centre line (session 59)
+//! A band split's element leaves out `clamp(u, band)`, the mass of its centres below the
+//! input. Its own centre line (the mean of its major branches) is that clamp smoothed over
+//! its radius, so the two differ within a radius of the band's edges, and the differences
+//! cancel only where the bands beside it weigh alike. Where a Preisach density changes along
+//! the centre axis (a Gaussian or Lorentzian plane), the fitted table's centre line bends with
+//! the weights, and `nonlinear-gain` takes the bend back: a curvature the records do not
+//! hold. [`CentreLine::Own`] and [`CentreLine::RiseOwn`] hold the band and rise splits'
+//! relays, each element less its own centre line over the table's range (read from its grid
+//! as the span split's is over the records' span), so that their loop is centred on the
+//! reversible map whatever the weights. They are not chosen by the loop alone: on one sine a
+//! table of wide relays bends its minor loops' centre line, and the own line took the thesis
+//! stage's true K'(u) into the table (GAP.md, session 52). `select`'s step 21 tries them
+//! only where a curvature is named beside the band or rise split's table on records whose
+//! held levels are reached from both sides.
+//!
 //! # Resolution and regulariser
 //! Radii: [`HYST_RADII`] at odd multiples of half the table's grid interval ([`radius_v`]:
 //! the basis follows the table's own resolution instead of a fixed list of radii);
@@ -323,6 +339,13 @@ pub enum CentreLine {
     /// The rise split with tents instead of bands, as [`CentreLine::Tent`] for the band split.
     #[serde(rename = "rise-tent")]
     RiseTent,
+    /// The band split's relays, each element less its own centre line over the table's range
+    /// (module doc, "The own centre line"; `select`'s step 21).
+    Own,
+    /// The rise split's relays, each band's element less its own centre line over the
+    /// table's range, as [`CentreLine::Own`] for the band split.
+    #[serde(rename = "rise-own")]
+    RiseOwn,
 }
 
 impl CentreLine {
@@ -331,7 +354,9 @@ impl CentreLine {
     pub const fn bands(self) -> usize {
         match self {
             CentreLine::Tent | CentreLine::RiseTent => HYST_TENTS_BAND,
-            CentreLine::Band | CentreLine::Rise => HYST_BANDS_BAND,
+            CentreLine::Band | CentreLine::Rise | CentreLine::Own | CentreLine::RiseOwn => {
+                HYST_BANDS_BAND
+            }
             CentreLine::Span => HYST_BANDS_SPAN,
         }
     }
@@ -348,14 +373,36 @@ impl CentreLine {
         match self {
             CentreLine::Band => Some(CentreLine::Tent),
             CentreLine::Rise => Some(CentreLine::RiseTent),
-            CentreLine::Span | CentreLine::Tent | CentreLine::RiseTent => None,
+            CentreLine::Span
+            | CentreLine::Tent
+            | CentreLine::RiseTent
+            | CentreLine::Own
+            | CentreLine::RiseOwn => None,
+        }
+    }
+
+    /// The same split with each band's element less its own centre line over the table's
+    /// range instead of `clamp(u, band)` (step 21 of `select`), where it has one: the band and
+    /// rise splits'.
+    pub const fn with_own_line(self) -> Option<CentreLine> {
+        match self {
+            CentreLine::Band => Some(CentreLine::Own),
+            CentreLine::Rise => Some(CentreLine::RiseOwn),
+            CentreLine::Span
+            | CentreLine::Tent
+            | CentreLine::RiseTent
+            | CentreLine::Own
+            | CentreLine::RiseOwn => None,
         }
     }
 
     /// Does this split carry the once-switching columns ([`rise_col`]) and start from the
     /// memory [`start_memory`] makes? [`CentreLine::Rise`] and [`CentreLine::RiseTent`].
     pub const fn rises(self) -> bool {
-        matches!(self, CentreLine::Rise | CentreLine::RiseTent)
+        matches!(
+            self,
+            CentreLine::Rise | CentreLine::RiseTent | CentreLine::RiseOwn
+        )
     }
 
     /// Does this split carry the edge columns ([`edge_col`]) on a range whose margin puts
@@ -388,6 +435,16 @@ impl CentreLine {
             CentreLine::RiseTent => (
                 "rise-tent",
                 "the rise split with each centre tent's relays less their memoryless part",
+            ),
+            CentreLine::Own => (
+                "own",
+                "each centre band's relays less their own centre line over the table's range: \
+                 a loop whose centre line is straight where its density changes along the range",
+            ),
+            CentreLine::RiseOwn => (
+                "rise-own",
+                "the rise split with each centre band's relays less their own centre line over \
+                 the table's range",
             ),
             CentreLine::Span => (
                 "span",
@@ -917,7 +974,8 @@ fn element(
         CentreLine::Band | CentreLine::Rise | CentreLine::Tent | CentreLine::RiseTent => {
             Box::new(move |u: f64| centres.below_on_nodes(u, range))
         }
-        CentreLine::Span => centre_line(&e, range),
+        CentreLine::Span => centre_line(&e, range, span_v(range)),
+        CentreLine::Own | CentreLine::RiseOwn => centre_line(&e, range, range),
     };
     (e, rev)
 }
@@ -992,12 +1050,14 @@ fn loop_elements(range: (f64, f64), form: CentreLine) -> Vec<(usize, usize, Cent
     out
 }
 
-/// The centre line over the records' span (nodes `EDGE_NODE` to `INTERVALS - EDGE_NODE`) of
-/// the table with grid `e` over `range`: the mean of its rising branch from the span's bottom
-/// and its falling branch from the span's top, held constant beyond the span.
-fn centre_line(e: &[f32], range: (f64, f64)) -> Box<dyn Fn(f64) -> f64> {
-    let (lo, hi) = span_v(range);
-    let n = CENTRE_POINTS_PER_INTERVAL * (INTERVALS - 2 * EDGE_NODE);
+/// The centre line over `(lo, hi)` (grid nodes: the records' span, nodes `EDGE_NODE` to
+/// `INTERVALS - EDGE_NODE`, for [`CentreLine::Span`]; the whole range for the own-line splits)
+/// of the table with grid `e` over `range`: the mean of its rising branch from `lo` and its
+/// falling branch from `hi`, held constant beyond them.
+fn centre_line(e: &[f32], range: (f64, f64), (lo, hi): (f64, f64)) -> Box<dyn Fn(f64) -> f64> {
+    let step = (range.1 - range.0) / INTERVALS as f64;
+    let intervals = ((hi - lo) / step).round().max(1.0) as usize;
+    let n = CENTRE_POINTS_PER_INTERVAL * intervals;
     let Ok(t) = HysteresisTable::from_grid(range.0 as f32, range.1 as f32, 0.0, e) else {
         return Box::new(|_| 0.0);
     };
@@ -1289,6 +1349,8 @@ mod tests {
             CentreLine::Rise,
             CentreLine::Tent,
             CentreLine::RiseTent,
+            CentreLine::Own,
+            CentreLine::RiseOwn,
         ] {
             reproduces(form);
         }
@@ -1546,6 +1608,60 @@ mod tests {
                 "seed {seed}: an invalid fit passed"
             );
         }
+    }
+
+    /// The own-line splits' loop is centred on the reversible map: with wide operators whose
+    /// weights peak mid-range (a Preisach density that changes along the centre axis), the
+    /// mean of the table's major rising and falling branches over its range is `g u` to f32
+    /// rounding (the branches of a bilinear table are linear between its nodes, so the
+    /// element's centre line read on eight points per interval is exact there), where the band
+    /// split's, each element less `clamp(u, band)`, bends with the weights (0.8 uV against
+    /// 51 mV here).
+    #[test]
+    fn the_own_line_split_keeps_the_loops_centre_line_straight() {
+        let range = (0.0, 11.0);
+        let g = params::PLANT_GAIN;
+        let bend_v = |form: CentreLine| -> f64 {
+            let mut weights = vec![0.0; HYST_COLS];
+            for k in 0..form.bands() {
+                let peak = 1.0 - ((k as f64 - 5.0) / 3.0).powi(2);
+                for i in [3, 6, 9] {
+                    weights[col(i, k)] = 0.03 * peak.max(0.0);
+                }
+            }
+            let fit = HystFit {
+                range,
+                weights,
+                start_v: vec![],
+                form,
+            };
+            let t = fit.section(g).table().expect("a valid table");
+            let n = 400;
+            let us: Vec<f64> = (0..=n)
+                .map(|j| range.0 + (range.1 - range.0) * j as f64 / n as f64)
+                .collect();
+            let mut mem = HysteresisMemory::new();
+            mem.reset(&t, range.1 as f32);
+            t.forward(&mut mem, range.0 as f32);
+            let up: Vec<f64> = us
+                .iter()
+                .map(|&u| t.forward(&mut mem, u as f32) as f64)
+                .collect();
+            let down: Vec<f64> = us
+                .iter()
+                .rev()
+                .map(|&u| t.forward(&mut mem, u as f32) as f64)
+                .collect();
+            // (the centre line less g u, less its value at the bottom: the table's level)
+            let c: Vec<f64> = (0..=n)
+                .map(|j| 0.5 * (up[j] + down[n - j]) - g * us[j])
+                .collect();
+            c.iter().fold(0.0f64, |m, v| m.max((v - c[0]).abs()))
+        };
+        let own = bend_v(CentreLine::Own);
+        let band = bend_v(CentreLine::Band);
+        assert!(own < 2e-5, "own-line split's centre line bends {own} V");
+        assert!(band > 1e-3, "band split's centre line bends only {band} V");
     }
 
     /// The tent split's relays are the band split's, spread otherwise: for every radius its
