@@ -2563,6 +2563,40 @@ fn diagnose_split(
                 }
                 ambiguous.push(pair);
             }
+            // Such an offset beside a curvature and no table: K'(u) has no constant term, but
+            // over records that never read the sensor's zero (no rest at 0 V, no input near
+            // it) its polynomial takes up a level too, and the records cannot tell the two
+            // (families cases 3222 and 3252: a tanh or softplus curvature and a sensor offset
+            // on one sine or chirp, the offset taken out as unshown and in no pair).
+            if let Some((fitted_v, level_v)) = unshown
+                && unit.len() == 1
+                && e == "offset"
+                && !named.iter().any(|n| n == "hysteresis")
+                && named.iter().any(|n| n == "nonlinear-gain")
+                && reads_no_zero(data, 0.0)
+            {
+                ambiguous.push(CannotTell {
+                    named: "nonlinear-gain".into(),
+                    alternative: "offset".into(),
+                    neither_named: false,
+                    taken_out: TakenOut::Unshown,
+                    rms_v: rms_of(&ms),
+                    alternative_rms_v: rms_of(&cur_mse),
+                    why: format!(
+                        "an offset fitted at {:.1} mV beside the curvature leaves {:.2} mV; taken \
+                         out, the curvature's refit takes up its level (the residual {:.1} mV off \
+                         zero) and leaves {:.2} mV: K'(u) has no constant term, but over inputs \
+                         that never come near 0 V its polynomial holds a level as a sensor \
+                         offset does; a rest at 0 V before the record (the recommended \
+                         protocol), or inputs down to 0 V, tell a sensor offset from the \
+                         curvature",
+                        1e3 * fitted_v,
+                        1e3 * rms_of(&cur_mse),
+                        1e3 * level_v,
+                        1e3 * rms_of(&ms)
+                    ),
+                });
+            }
             // A static shape beside a table on records without holds that the final check
             // took out below its bar, though the residual without it grew by more than a
             // misfit of form costs: the others' refit, the table's reversible slopes along the
