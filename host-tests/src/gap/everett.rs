@@ -323,6 +323,11 @@ pub const HYST_BAND_SMOOTH: f64 = 0.1;
 ///   `Span` 346 and 273 mV. Neither split serves both families.
 /// * [`CentreLine::Rise`]: the band split with the relays below the records on at the start
 ///   and once-switching relays above them (module doc, "The rise split").
+/// * [`CentreLine::Tent`], [`CentreLine::RiseTent`]: the band and rise splits with tents
+///   instead of bands (module doc, "The tent split"; `select`'s step 20).
+/// * [`CentreLine::Own`], [`CentreLine::RiseOwn`]: the band and rise splits with each element
+///   less its own centre line over the table's range (module doc, "The own centre line";
+///   `select`'s step 21).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
 #[serde(rename_all = "lowercase")]
 pub enum CentreLine {
@@ -1061,11 +1066,24 @@ fn centre_line(e: &[f32], range: (f64, f64), (lo, hi): (f64, f64)) -> Box<dyn Fn
     let Ok(t) = HysteresisTable::from_grid(range.0 as f32, range.1 as f32, 0.0, e) else {
         return Box::new(|_| 0.0);
     };
+    let c = major_centre_v(&t, (lo, hi), n);
+    Box::new(move |u: f64| {
+        let p = ((u - lo) / (hi - lo) * n as f64).clamp(0.0, n as f64);
+        let j = (p.floor() as usize).min(n - 1);
+        let f = p - j as f64;
+        c[j] * (1.0 - f) + c[j + 1] * f
+    })
+}
+
+/// The centre line of table `t` between `lo` and `hi` at `n + 1` evenly spaced inputs: the
+/// mean of its rising branch from `lo` (after coming down from `hi`) and its falling branch
+/// from `hi`.
+fn major_centre_v(t: &HysteresisTable, (lo, hi): (f64, f64), n: usize) -> Vec<f64> {
     let us: Vec<f64> = (0..=n)
         .map(|j| lo + (hi - lo) * j as f64 / n as f64)
         .collect();
     let mut mem = HysteresisMemory::new();
-    mem.reset(&t, hi as f32);
+    mem.reset(t, hi as f32);
     t.forward(&mut mem, lo as f32);
     let up: Vec<f64> = us
         .iter()
@@ -1076,13 +1094,7 @@ fn centre_line(e: &[f32], range: (f64, f64), (lo, hi): (f64, f64)) -> Box<dyn Fn
         .rev()
         .map(|&u| t.forward(&mut mem, u as f32) as f64)
         .collect();
-    let c: Vec<f64> = (0..=n).map(|j| 0.5 * (up[j] + down[n - j])).collect();
-    Box::new(move |u: f64| {
-        let p = ((u - lo) / (hi - lo) * n as f64).clamp(0.0, n as f64);
-        let j = (p.floor() as usize).min(n - 1);
-        let f = p - j as f64;
-        c[j] * (1.0 - f) + c[j + 1] * f
-    })
+    (0..=n).map(|j| 0.5 * (up[j] + down[n - j])).collect()
 }
 
 /// The samples of `u_v` a rate-independent table must be driven through to give, at every
@@ -1636,25 +1648,13 @@ mod tests {
                 form,
             };
             let t = fit.section(g).table().expect("a valid table");
+            // (the centre line less g u, less its value at the bottom: the table's level; at
+            // 400 inputs, off the nodes and the eight points per interval the fit reads)
             let n = 400;
-            let us: Vec<f64> = (0..=n)
-                .map(|j| range.0 + (range.1 - range.0) * j as f64 / n as f64)
-                .collect();
-            let mut mem = HysteresisMemory::new();
-            mem.reset(&t, range.1 as f32);
-            t.forward(&mut mem, range.0 as f32);
-            let up: Vec<f64> = us
-                .iter()
-                .map(|&u| t.forward(&mut mem, u as f32) as f64)
-                .collect();
-            let down: Vec<f64> = us
-                .iter()
-                .rev()
-                .map(|&u| t.forward(&mut mem, u as f32) as f64)
-                .collect();
-            // (the centre line less g u, less its value at the bottom: the table's level)
-            let c: Vec<f64> = (0..=n)
-                .map(|j| 0.5 * (up[j] + down[n - j]) - g * us[j])
+            let c: Vec<f64> = major_centre_v(&t, range, n)
+                .into_iter()
+                .enumerate()
+                .map(|(j, v)| v - g * (range.0 + (range.1 - range.0) * j as f64 / n as f64))
                 .collect();
             c.iter().fold(0.0f64, |m, v| m.max((v - c[0]).abs()))
         };

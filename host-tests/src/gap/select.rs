@@ -3541,10 +3541,10 @@ fn diagnose_split(
     // records' and stays. Else, where the model without it leaves no more over the records
     // and in none more than the band split with it, the curvature was the basis', not the
     // records': it is taken out, the table refitted on the own-line split, and the pair
-    // reported. Only on
-    // records whose held levels are reached from both sides (`told_beside_loop`'s levels):
-    // on one sine a table of wide relays bends its minor loops' centre line, and there the
-    // own-line split took the thesis stage's true K'(u) into the table (GAP.md, session 52).
+    // reported. Only on records whose held levels are reached from both sides
+    // (`levels_from_both_sides`): on one sine a table of wide relays bends its minor loops'
+    // centre line, and there the own-line split took the thesis stage's true K'(u) into the
+    // table (GAP.md, session 52).
     if named.iter().any(|n| n == "hysteresis")
         && named.iter().any(|n| n == "nonlinear-gain")
         && !start_level_named
@@ -3615,11 +3615,11 @@ fn diagnose_split(
                 alternative_rms_v: rms_of(&cur_mse),
                 why: format!(
                     "a curvature beside the band split's table left {:.2} mV; the table whose \
-                     elements leave out their own centre line leaves {:.2} mV without it: a \
-                     Preisach density that changes along the range bends the loop's centre \
-                     line as a static curvature does, and these records are fitted as well \
-                     without one; records whose loops are centred on a known map (a hold at \
-                     rest after a demagnetising scan) tell the two",
+                     elements leave out their own centre line leaves {:.2} mV without it, and \
+                     a curvature beside that table does not earn its parameters: a Preisach \
+                     density that changes along the range bends the centre line of the \
+                     records' loops as a static curvature does, and these records are fitted \
+                     as well by the loop alone, so the curvature is not named",
                     1e3 * rms_of(&cur_mse),
                     1e3 * rms_of(&ms)
                 ),
@@ -4072,8 +4072,9 @@ fn shapes_told_beside_loop(named: &[String], form: CentreLine) -> bool {
 }
 
 /// Do the records hold levels reached from both sides, as [`told_beside_loop`] asks of them:
-/// [`HELD_LEVELS_MIN`] distinct levels in all, two or more reached from below and two or more
-/// from above ([`held_levels_on`])?
+/// [`HELD_LEVELS_MIN`] distinct levels in all (as the pooled test asked: a scale, an offset
+/// and a curvature are three parameters), two or more reached from below and two or more from
+/// above ([`held_levels_on`])?
 fn levels_from_both_sides(data: &[Data]) -> bool {
     held_levels(data) >= HELD_LEVELS_MIN
         && [true, false]
@@ -4098,9 +4099,7 @@ fn levels_from_both_sides(data: &[Data]) -> bool {
 /// named beside a loop were right 19 times and false 26. An offset's rest at 0 V is the other
 /// test (the final check asks it beside this one).
 fn told_beside_loop(data: &[Data], with: &[Vec<f64>], without: &[Vec<f64>], var: &[f64]) -> bool {
-    // (three levels in all, as the pooled test asked: a scale, an offset and a curvature are
-    // three parameters)
-    held_levels(data) >= HELD_LEVELS_MIN
+    levels_from_both_sides(data)
         && [true, false].into_iter().all(|from_below| {
             match (
                 held_level_error_from(data, with, var, Some(from_below)),
