@@ -4027,6 +4027,10 @@ fn prune_bar(unit: &[String]) -> f64 {
 /// [`HELD_LEVEL_MIN_SEP_V`] count as one).
 pub const HELD_LEVELS_MIN: usize = 3;
 
+/// Held levels the holds reached from one side (below or above) must show for step 17's tell
+/// and step 21 (our assumption, session 47: two levels give each side a slope of its own).
+pub const HELD_LEVELS_PER_SIDE: usize = 2;
+
 /// Input volts by which two held levels must differ to count as two (our assumption: a tenth
 /// of a volt is a few per cent of the range a static shape bends over).
 pub const HELD_LEVEL_MIN_SEP_V: f64 = 0.1;
@@ -4073,13 +4077,13 @@ fn shapes_told_beside_loop(named: &[String], form: CentreLine) -> bool {
 
 /// Do the records hold levels reached from both sides, as [`told_beside_loop`] asks of them:
 /// [`HELD_LEVELS_MIN`] distinct levels in all (as the pooled test asked: a scale, an offset
-/// and a curvature are three parameters), two or more reached from below and two or more from
-/// above ([`held_levels_on`])?
+/// and a curvature are three parameters), [`HELD_LEVELS_PER_SIDE`] or more reached from below
+/// and as many from above ([`held_levels_on`])?
 fn levels_from_both_sides(data: &[Data]) -> bool {
     held_levels(data) >= HELD_LEVELS_MIN
         && [true, false]
             .into_iter()
-            .all(|from_below| held_levels_on(data, Some(from_below)) >= 2)
+            .all(|from_below| held_levels_on(data, Some(from_below)) >= HELD_LEVELS_PER_SIDE)
 }
 
 /// Do the records tell the static shapes beside a table from the loop's own centre line and
@@ -4151,7 +4155,12 @@ fn held_level_error_from(
     var: &[f64],
     side: Option<bool>,
 ) -> Option<f64> {
-    if held_levels_on(data, side) < if side.is_some() { 2 } else { HELD_LEVELS_MIN } {
+    let needed = if side.is_some() {
+        HELD_LEVELS_PER_SIDE
+    } else {
+        HELD_LEVELS_MIN
+    };
+    if held_levels_on(data, side) < needed {
         return None;
     }
     let mut err = 0.0;
