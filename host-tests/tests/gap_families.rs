@@ -718,7 +718,11 @@ fn suite_meets([exact_pct, false_pct, cut_pct, said_pct]: [f64; 4], rates: bool,
 /// 86.0 % exact, 7 false names of 643 (1.1 %), 95.7 % exact or honest (a scale beside a
 /// curvature no longer named as an offset: GAP.md, step 14 (d)). Session 59: 86.3 % exact,
 /// 4 false names of 640 (0.6 %: that figure met on this suite), 96.7 % exact or honest (a
-/// curvature that was the band split's own centre line taken out: GAP.md, step 21).
+/// curvature that was the band split's own centre line taken out: GAP.md, step 21). Session
+/// 60, on fresh seeds 8000-8399 (`GAP_FIRST=8000 GAP_CASES=400`): 85.5 % exact and 13 false
+/// names of 465 (2.8 %) at the session's start, 86.2 % and 7 of 459 (1.5 %) with step 21
+/// beside the span split's table: the false-name figure is not met on seeds no rule was
+/// shaped on.
 #[test]
 #[ignore = "issue #12: workflow does not yet meet this on all families"]
 fn randomised_families_are_named() {
@@ -1362,6 +1366,47 @@ fn a_curvature_that_is_the_band_splits_own_centre_line_goes() {
         d.table()
     );
     assert!(d.final_rms_v < 1.5 * d.noise_floor_v, "{}", d.table());
+}
+
+/// Step 21 beside the span split's table (session 60), on two drawn Lorentz Preisach planes
+/// alone, whose generator takes the plane's centre curve out: on the identification protocol
+/// (seed 8286) a curvature, an offset and a scale once named together beside the span split's
+/// table (3.14x the floor) go together, each removal said in a step and each pair reported;
+/// on random levels (seed 8093) a curvature alone (2.14x) goes. Both are then named
+/// `hysteresis` alone, the table on the own-line split, and end nearer the floor than before
+/// (measured 2.50x and 1.30x; bound 3x and 1.5x). Written on these cases: a guard of the step,
+/// not evidence of its generality (the families suite's other seeds are).
+#[test]
+fn static_shapes_beside_the_span_splits_table_go_on_its_own_line() {
+    let base = ModelFile::built_in("thesis-linear").unwrap();
+    for (seed, gone, bound) in [
+        (8286, &["nonlinear-gain", "offset", "sensor-gain"][..], 3.0),
+        (8093, &["nonlinear-gain"][..], 1.5),
+    ] {
+        let data = Case::draw(seed).records();
+        let d = diagnose(&base, &data, &Options::default()).expect("diagnosis");
+        assert_eq!(d.named, ["hysteresis"], "seed {seed}\n{}", d.table());
+        for e in gone {
+            assert!(
+                d.steps.iter().any(|s| s.effect == *e
+                    && s.removed
+                    && s.evidence.starts_with("the table's own centre line")),
+                "seed {seed}: {e}\n{}",
+                d.table()
+            );
+            assert!(
+                d.cannot_tell
+                    .iter()
+                    .any(|c| c.named == "hysteresis" && c.alternative == *e),
+                "seed {seed}: {e}"
+            );
+        }
+        assert!(
+            d.final_rms_v < bound * d.noise_floor_v,
+            "seed {seed}\n{}",
+            d.table()
+        );
+    }
 }
 
 /// Step 14 end to end, on two drawn cases (`select.rs`; the unit test beside `scale_order`

@@ -110,8 +110,11 @@
 //! reversible map whatever the weights. They are not chosen by the loop alone: on one sine a
 //! table of wide relays bends its minor loops' centre line, and the own line took the thesis
 //! stage's true K'(u) into the table (GAP.md, session 52). `select`'s step 21 tries them
-//! only where a curvature is named beside the band or rise split's table on records whose
-//! held levels are reached from both sides.
+//! only where static shapes are named beside a table on records whose held levels are reached
+//! from both sides. The span split's table (session 60) tries [`CentreLine::Own`] too: its
+//! elements leave out their centre line over the records' span, which on records that span
+//! less than the table's range is not the line over the table's range, and a narrow plane's
+//! misfit there was taken up by a curvature, a scale and an offset together.
 //!
 //! # Resolution and regulariser
 //! Radii: [`HYST_RADII`] at odd multiples of half the table's grid interval ([`radius_v`]:
@@ -386,18 +389,15 @@ impl CentreLine {
         }
     }
 
-    /// The same split with each band's element less its own centre line over the table's
-    /// range instead of `clamp(u, band)` (step 21 of `select`), where it has one: the band and
-    /// rise splits'.
+    /// The same relays with each band's element less its own centre line over the table's
+    /// range instead of `clamp(u, band)` (step 21 of `select`), where there is one: the band
+    /// and rise splits', and for the span split (whose elements leave out their centre line
+    /// over the records' span) the band split's, [`CentreLine::Own`].
     pub const fn with_own_line(self) -> Option<CentreLine> {
         match self {
-            CentreLine::Band => Some(CentreLine::Own),
+            CentreLine::Band | CentreLine::Span => Some(CentreLine::Own),
             CentreLine::Rise => Some(CentreLine::RiseOwn),
-            CentreLine::Span
-            | CentreLine::Tent
-            | CentreLine::RiseTent
-            | CentreLine::Own
-            | CentreLine::RiseOwn => None,
+            CentreLine::Tent | CentreLine::RiseTent | CentreLine::Own | CentreLine::RiseOwn => None,
         }
     }
 
