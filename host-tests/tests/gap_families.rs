@@ -1851,3 +1851,56 @@ fn the_issues_single_sine_with_the_families_loops() {
     }
     println!("the requirement met on {met} of {} seeds", seeds.len());
 }
+
+/// A creep beside a loop whose held levels' gap the creep's tails dwarf (session 61, fresh
+/// seed 9001: a Gaussian Preisach plane with a 5.5 % loop beside a power-law creep on random
+/// levels; tails of 86 mV against an 11 mV gap, so the table alone is held back, while the
+/// drift alone explains nothing). Named nothing at 120x the floor before; the joint creep and
+/// loop step, offered where the drift alone explains less than `MIN_EXPLAINED`, names both
+/// (measured 1.06x; bound 1.5x). Written on this case: a guard of the rule, not evidence of
+/// its generality (the families suite's other seeds are).
+#[test]
+fn a_creep_the_drift_alone_cannot_take_is_fitted_with_its_loop() {
+    let base = ModelFile::built_in("thesis-linear").unwrap();
+    let data = Case::draw(9001).records();
+    let d = diagnose(&base, &data, &Options::default()).expect("diagnosis");
+    let mut named = d.named.clone();
+    named.sort();
+    assert_eq!(named, ["drift", "hysteresis"], "{}", d.table());
+    assert!(
+        d.steps.iter().any(|s| s.effect == "drift+hysteresis"),
+        "{}",
+        d.table()
+    );
+    assert!(d.final_rms_v < 1.5 * d.noise_floor_v, "{}", d.table());
+}
+
+/// Step 14 (e) on the identification protocol (session 61, fresh seeds 9192 and 9044: a tanh
+/// curvature beside a 1.3 % and a 0.7 % scale). Beside the catalogue's quadratic the scale
+/// was taken out by the final check (9192, 12x the floor) or never explained enough to be
+/// named (9044, 5.7x); with K'(u) refitted to its own order before the final check, and the
+/// scale offered beside it, both are named and end near the floor (measured 1.11x and 1.10x;
+/// bound 1.5x), K'(u) above the quadratic. Written on these cases: a guard of the step.
+#[test]
+fn a_curvature_of_its_own_order_keeps_the_scale_beside_it() {
+    let base = ModelFile::built_in("thesis-linear").unwrap();
+    for seed in [9192, 9044] {
+        let data = Case::draw(seed).records();
+        let d = diagnose(&base, &data, &Options::default()).expect("diagnosis");
+        let mut named = d.named.clone();
+        named.sort();
+        assert_eq!(
+            named,
+            ["nonlinear-gain", "sensor-gain"],
+            "seed {seed}\n{}",
+            d.table()
+        );
+        let higher = d.model.nonlinear_gain.as_ref().unwrap().poly[3..].to_vec();
+        assert!(higher.iter().any(|c| *c != 0.0), "seed {seed}");
+        assert!(
+            d.final_rms_v < 1.5 * d.noise_floor_v,
+            "seed {seed}\n{}",
+            d.table()
+        );
+    }
+}
