@@ -1412,7 +1412,8 @@ fn static_shapes_beside_the_span_splits_table_go_on_its_own_line() {
 /// Step 14 end to end, on two drawn cases (`select.rs`; the unit test beside `scale_order`
 /// checks the fits): a tanh-like curvature alone on the identification protocol (seed 1079),
 /// once named with a false 0.2 % scale, is named alone, its K'(u) with a cubic term, the
-/// scale's removal said in a step and the pair reported; an exp curvature with a 20 mV offset
+/// scale's removal said in a step (and the pair reported where step 14 took it out; since
+/// session 61 the final check takes it out beside step 14 (e)'s cubic); an exp curvature with a 20 mV offset
 /// on a long sine (seed 1222), once named with a false 1.8 % scale in the offset's place, is
 /// named with the offset (swapped in by step 14 (b) until session 58; since, the final check
 /// takes the scale out first), and both end within 1.5x the floor; step 14 (c) on a
@@ -1428,18 +1429,31 @@ fn a_scale_beside_a_curvature_gives_way_to_its_cubic_or_to_an_offset() {
     assert_eq!(d.named, ["nonlinear-gain"], "{}", d.table());
     let higher = d.model.nonlinear_gain.as_ref().unwrap().poly[3..].to_vec();
     assert!(higher.iter().any(|c| *c != 0.0) && d.model.sensor_gain.is_none());
-    assert!(d.steps.iter().any(|s| {
+    // (the scale's removal is said in a step: step 14's, the curvature of higher order in its
+    // place (its parameters, the pair reported), or since session 61 the final check's,
+    // beside the curvature that step 14 (e) refitted to its own order first on these records,
+    // which start at rest at 0 V: there the scale did not earn its place, no look-alike)
+    let by_step_14 = d.steps.iter().any(|s| {
         s.effect == "sensor-gain"
             && s.removed
             && s.params
                 .keys()
                 .any(|k| k.starts_with('c') && k != "c1_per_v" && k != "c2_per_v2")
-    }));
-    assert!(
-        d.cannot_tell
-            .iter()
-            .any(|c| c.named == "nonlinear-gain" && c.alternative == "sensor-gain")
-    );
+    }) && d
+        .cannot_tell
+        .iter()
+        .any(|c| c.named == "nonlinear-gain" && c.alternative == "sensor-gain");
+    let own_order = d.steps.iter().position(|s| {
+        s.effect == "nonlinear-gain" && s.refit && s.evidence.starts_with("a curvature of order")
+    });
+    let by_final_check = own_order.is_some_and(|i| {
+        d.steps[i..].iter().any(|s| {
+            s.effect == "sensor-gain"
+                && s.removed
+                && s.evidence.starts_with("removed in the final check")
+        })
+    });
+    assert!(by_step_14 || by_final_check, "{}", d.table());
     assert!(d.final_rms_v < 1.5 * d.noise_floor_v);
     let d = run(1222);
     let mut named = d.named.clone();
@@ -1861,11 +1875,7 @@ fn the_issues_single_sine_with_the_families_loops() {
 /// its generality (the families suite's other seeds are).
 #[test]
 fn a_creep_the_drift_alone_cannot_take_is_fitted_with_its_loop() {
-    let base = ModelFile::built_in("thesis-linear").unwrap();
-    let data = Case::draw(9001).records();
-    let d = diagnose(&base, &data, &Options::default()).expect("diagnosis");
-    let mut named = d.named.clone();
-    named.sort();
+    let (d, named) = diagnosed_sorted(9001);
     assert_eq!(named, ["drift", "hysteresis"], "{}", d.table());
     assert!(
         d.steps.iter().any(|s| s.effect == "drift+hysteresis"),
@@ -1883,12 +1893,8 @@ fn a_creep_the_drift_alone_cannot_take_is_fitted_with_its_loop() {
 /// bound 1.5x), K'(u) above the quadratic. Written on these cases: a guard of the step.
 #[test]
 fn a_curvature_of_its_own_order_keeps_the_scale_beside_it() {
-    let base = ModelFile::built_in("thesis-linear").unwrap();
     for seed in [9192, 9044] {
-        let data = Case::draw(seed).records();
-        let d = diagnose(&base, &data, &Options::default()).expect("diagnosis");
-        let mut named = d.named.clone();
-        named.sort();
+        let (d, named) = diagnosed_sorted(seed);
         assert_eq!(
             named,
             ["nonlinear-gain", "sensor-gain"],
@@ -1903,4 +1909,14 @@ fn a_curvature_of_its_own_order_keeps_the_scale_beside_it() {
             d.table()
         );
     }
+}
+
+/// The drawn case `seed` diagnosed from `thesis-linear`, and its named set sorted.
+fn diagnosed_sorted(seed: u64) -> (gap::Diagnosis, Vec<String>) {
+    let base = ModelFile::built_in("thesis-linear").unwrap();
+    let data = Case::draw(seed).records();
+    let d = diagnose(&base, &data, &Options::default()).expect("diagnosis");
+    let mut named = d.named.clone();
+    named.sort();
+    (d, named)
 }
