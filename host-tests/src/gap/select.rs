@@ -2617,7 +2617,7 @@ fn diagnose_split(
                 let m = refit_slow(&m, &[], data, &slow_x, u_range)?;
                 let (s, ms) = simulate_all(&m, data).ok()?;
                 // (like for like: where the model's K'(u) is of a higher order than the
-                // catalogue's quadratic the refit gives (step 14), the model without the unit
+                // catalogue's quadratic the refit gives (step 14 (e)), the model without the unit
                 // keeps that order, its terms refitted beside the shapes left)
                 let order = gain_order(&model);
                 if order > QUADRATIC
