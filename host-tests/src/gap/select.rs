@@ -851,14 +851,20 @@ fn creep_and_loop(
     u_range: (f64, f64),
     sigs: &signatures::Signatures,
 ) -> Option<Candidate> {
-    let shown = sigs.tail_v >= DRIFT_TAIL_MIN_NOISE * sigs.noise_v
-        && sigs.held_loop_v >= HYST_LOOP_MIN_NOISE * sigs.noise_v
-        && sigs.held_loop_v >= HELD_LOOP_OVER_TAIL * sigs.tail_v;
+    let shown = tails_and_gap_shown(sigs) && sigs.held_loop_v >= HELD_LOOP_OVER_TAIL * sigs.tail_v;
     if !shown || CREEP_AND_LOOP.iter().any(|e| catalogue::present(model, e)) {
         return None;
     }
     let fitted = fit_slow_set(model, data, slow_x, &CREEP_AND_LOOP, u_range)?;
     Some(joint_candidate(&CREEP_AND_LOOP, fitted))
+}
+
+/// Do the holds show a creep's tails and a held levels' gap, each by the signatures' own bar
+/// (the joint creep and loop's first gate, [`creep_and_loop`] and
+/// [`creep_beside_loop_the_drift_cannot`])?
+fn tails_and_gap_shown(sigs: &signatures::Signatures) -> bool {
+    sigs.tail_v >= DRIFT_TAIL_MIN_NOISE * sigs.noise_v
+        && sigs.held_loop_v >= HYST_LOOP_MIN_NOISE * sigs.noise_v
 }
 
 /// The joint creep and loop offered where [`creep_and_loop`]'s ratio of gap to tail held it
@@ -874,9 +880,7 @@ fn creep_beside_loop_the_drift_cannot(
     sigs: &signatures::Signatures,
     tried: &[(&str, bool, f64, f64)],
 ) -> Option<Candidate> {
-    let shown = sigs.tail_v >= DRIFT_TAIL_MIN_NOISE * sigs.noise_v
-        && sigs.held_loop_v >= HYST_LOOP_MIN_NOISE * sigs.noise_v
-        && sigs.held_loop_v < HELD_LOOP_OVER_TAIL * sigs.tail_v;
+    let shown = tails_and_gap_shown(sigs) && sigs.held_loop_v < HELD_LOOP_OVER_TAIL * sigs.tail_v;
     let alone = |e: &str| tried.iter().find(|t| t.0 == e && !t.1);
     let drift_none = alone("drift").is_some_and(|d| d.3 < MIN_EXPLAINED);
     let table_some = alone("hysteresis").is_some_and(|h| h.2 < 0.0 && h.3 >= MIN_EXPLAINED);
@@ -1163,7 +1167,7 @@ fn curvature_in_place_of(
 ) -> Option<(scale_order::CurvatureFit, Vec<f64>)> {
     let lowest = scale_order::CUBIC;
     let excess = |mse: &[f64], i: usize| (mse[i] - var[i]).max(0.0) / var[i].max(f64::MIN_POSITIVE);
-    let shown = (0..var.len()).any(|i| excess(cur_mse, i) >= HIGHER_ORDER_SHOWN_VAR);
+    let shown = higher_order_shown(cur_mse, var);
     for order in scale_order::CURVATURE_ORDERS {
         // (the orders above the cubic only where the records show what the model leaves)
         if order > lowest && !shown {
@@ -1206,6 +1210,15 @@ fn curvature_in_place_of(
     None
 }
 
+/// Do the records show what the model leaves, for K'(u) above the cubic (step 14) or above
+/// the quadratic (step 14 (e)): some record [`HIGHER_ORDER_SHOWN_VAR`] noise variances or more
+/// above its floor under the model (`cur_mse`, `var` per record)?
+fn higher_order_shown(cur_mse: &[f64], var: &[f64]) -> bool {
+    (0..var.len()).any(|i| {
+        (cur_mse[i] - var[i]).max(0.0) / var[i].max(f64::MIN_POSITIVE) >= HIGHER_ORDER_SHOWN_VAR
+    })
+}
+
 /// Step 14 (e): K'(u) refitted at the orders above the quadratic beside the named scale and
 /// offset, stepping up from the model as it stands: an order is kept where it leaves less in
 /// every record than the one kept before it (at first the quadratic), which leaves above the
@@ -1220,10 +1233,7 @@ fn curvature_order(
     cur_mse: &[f64],
     var: &[f64],
 ) -> Option<scale_order::CurvatureFit> {
-    let shown = (0..var.len()).any(|i| {
-        (cur_mse[i] - var[i]).max(0.0) / var[i].max(f64::MIN_POSITIVE) >= HIGHER_ORDER_SHOWN_VAR
-    });
-    if !shown || gain_order(model) != QUADRATIC {
+    if !higher_order_shown(cur_mse, var) || gain_order(model) != QUADRATIC {
         return None;
     }
     let orders: Vec<usize> = scale_order::CURVATURE_ORDERS.collect();
