@@ -281,6 +281,8 @@ struct Outcome {
     cuts: Vec<(String, Vec<ResidualCut>)>,
     describe: String,
     seconds: f64,
+    /// The diagnosis refused the records (an error, not a diagnosis): named nothing.
+    refused: bool,
 }
 
 impl Outcome {
@@ -299,7 +301,26 @@ fn run_case(seed: u64) -> Outcome {
     let case = Case::draw(seed);
     let data = case.records();
     let base = ModelFile::built_in("thesis-linear").unwrap();
-    let d = diagnose(&base, &data, &Options::default()).expect("diagnosis");
+    // (a refusal of a drawn case is a failure of the workflow: counted, named with its seed
+    // to rerun it, and the rest of the run still measured)
+    let d = match diagnose(&base, &data, &Options::default()) {
+        Ok(d) => d,
+        Err(e) => {
+            println!("REFUSED seed {seed} truth {:?}: {e:#}", case.effects);
+            return Outcome {
+                family: case.protocol.family,
+                truth: case.effects.iter().map(|s| s.to_string()).collect(),
+                forms: case.forms(),
+                named: Vec::new(),
+                reported: Vec::new(),
+                final_over_floor: f64::INFINITY,
+                cuts: Vec::new(),
+                describe: case.describe(),
+                seconds: started.elapsed().as_secs_f64(),
+                refused: true,
+            };
+        }
+    };
     if std::env::var("GAP_DEBUG").is_ok() {
         println!(
             "seed {seed} truth {:?}: {}\n{}",
@@ -355,6 +376,7 @@ fn run_case(seed: u64) -> Outcome {
         cuts,
         describe: case.describe(),
         seconds: started.elapsed().as_secs_f64(),
+        refused: false,
     }
 }
 
@@ -375,6 +397,8 @@ struct Tally {
     right_names: usize,
     cut_met: usize,
     seconds: f64,
+    /// Cases whose records the diagnosis refused ([`Outcome::refused`]).
+    refused: usize,
 }
 
 impl Outcome {
@@ -396,6 +420,7 @@ impl Tally {
     fn add(&mut self, o: &Outcome) {
         self.cases += 1;
         self.seconds += o.seconds;
+        self.refused += o.refused as usize;
         self.exact += (o.truth == o.named) as usize;
         self.said += o.said() as usize;
         self.right_names += o.cuts.len();
@@ -603,6 +628,7 @@ fn run_suite() -> Option<Tally> {
         all.right_names,
         all.cut_pct()
     );
+    println!("cases whose records the diagnosis refused: {}", all.refused);
     only.is_none().then_some(all)
 }
 
@@ -680,6 +706,7 @@ fn suite_meets([exact_pct, false_pct, cut_pct, said_pct]: [f64; 4], rates: bool,
         return;
     };
     assert_eq!(all.clean_named, 0, "clean records must get no name");
+    assert_eq!(all.refused, 0, "drawn cases the diagnosis refused (REFUSED lines)");
     if !cfg!(debug_assertions) && rates {
         assert!(all.cases >= 100, "{} cases, at least 100", all.cases);
         assert!(
@@ -1909,6 +1936,21 @@ fn a_curvature_of_its_own_order_keeps_the_scale_beside_it() {
             d.table()
         );
     }
+}
+
+/// A step down to a held level rings the model's output past the record while the input
+/// holds (session 62, fresh seed 10264: a Lorentzian Preisach plane with a 7.9 % loop on
+/// random levels, the lowest held level 1.29 V for 0.12 s). The saturation test read the
+/// line's ringing there as the model's output going on where the record stood still, and the
+/// diagnosis refused the record as a saturated sensor; the line's move now counts only as far
+/// as the input's own goes. Diagnosed, the loop is named and ends near the floor (measured
+/// 1.12x; bound 1.5x). Written on this case: a guard of the refusal's reading, beside the
+/// saturated sine that `gap.rs` still refuses.
+#[test]
+fn a_ringing_after_a_step_to_the_lowest_level_is_not_a_saturated_sensor() {
+    let (d, named) = diagnosed_sorted(10264);
+    assert_eq!(named, ["hysteresis"], "{}", d.table());
+    assert!(d.final_rms_v < 1.5 * d.noise_floor_v, "{}", d.table());
 }
 
 /// The drawn case `seed` diagnosed from `thesis-linear`, and its named set sorted.

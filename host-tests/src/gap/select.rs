@@ -1556,8 +1556,12 @@ fn clipped(y: &[f64], sim: &[f64], floor_v: f64) -> Option<(f64, usize, f64)> {
 /// line on the model's output goes past the record by `CLIP_SPAN_SHARE` of the line's span
 /// over the whole record or more (and `REVERSED_MIN_FLOORS` floors), where there are
 /// `CLIP_MIN_SAMPLES` of them and the line goes on towards the extreme by as much within
-/// one unbroken run of them (the model says the output went on, as the input did, where the
-/// record stood still), and how far past the line goes there at most. A sine's crest or a
+/// one unbroken run of them, as the input does (the model says the output went on, as the
+/// input did, where the record stood still: the line's move counts no further than the
+/// input's own over the same samples, at the line's span per volt of the input's over the
+/// record; families case 10264, random levels beside a loop, was refused on the ringing of
+/// the line after a step down to a held level, the input still), and how far past the line
+/// goes there at most. A sine's crest or a
 /// step's overshoot keeps the line with the record (a loop's branches meet at the top), a
 /// held level the model misses keeps it still, and a loop's reading stays put only after a
 /// reversal, while the line moves back from the extreme (families seeds 3100-3699: two
@@ -1567,7 +1571,7 @@ fn clipped(y: &[f64], sim: &[f64], floor_v: f64) -> Option<(f64, usize, f64)> {
 /// nor is a record whose input `u` comes near the amplifier's limits, where its saturation,
 /// an effect of the catalogue, flattens the output the same way. `None` otherwise.
 fn flattened(u: &[f64], y: &[f64], sim: &[f64], floor_v: f64) -> Option<(f64, usize, f64)> {
-    let n = y.len().min(sim.len());
+    let n = y.len().min(sim.len()).min(u.len());
     let need = clip_need(n);
     if n < 2 * need || floor_v.is_nan() || floor_v <= 0.0 || signatures::near_amp_limits(min_max(u))
     {
@@ -1577,6 +1581,8 @@ fn flattened(u: &[f64], y: &[f64], sim: &[f64], floor_v: f64) -> Option<(f64, us
     let line: Vec<f64> = sim[..n].iter().map(|s| m.at(*s)).collect();
     let (line_lo, line_hi) = min_max(&line);
     let bar = (CLIP_SPAN_SHARE * (line_hi - line_lo)).max(REVERSED_MIN_FLOORS * floor_v);
+    let (u_lo, u_hi) = min_max(&u[..n]);
+    let per_input_v = (line_hi - line_lo) / (u_hi - u_lo).max(f64::EPSILON);
     let mut sorted: Vec<f64> = y[..n].to_vec();
     sorted.sort_by(f64::total_cmp);
     [(sorted[n - need], 1.0), (sorted[need - 1], -1.0)]
@@ -1590,16 +1596,20 @@ fn flattened(u: &[f64], y: &[f64], sim: &[f64], floor_v: f64) -> Option<(f64, us
                 })
                 .collect();
             // (and goes on towards the extreme by the bar within one unbroken run of them, as
-            // the input does: a held level the model misses keeps the line still, and a
-            // loop's reading stays put only after a reversal, the line moving back)
+            // the input does: a held level the model misses keeps the line still, a loop's
+            // reading stays put only after a reversal, the line moving back, and the line
+            // rings after a step while the input holds)
             let mut moves = 0.0f64;
-            let mut least = f64::INFINITY;
+            let mut least = (f64::INFINITY, 0usize);
             for (k, &i) in at.iter().enumerate() {
                 if k > 0 && i != at[k - 1] + 1 {
-                    least = f64::INFINITY;
+                    least = (f64::INFINITY, i);
                 }
-                least = least.min(sign * line[i]);
-                moves = moves.max(sign * line[i] - least);
+                if sign * line[i] < least.0 {
+                    least = (sign * line[i], i);
+                }
+                let input_move_v = (sign * (u[i] - u[least.1])).max(0.0) * per_input_v;
+                moves = moves.max((sign * line[i] - least.0).min(input_move_v));
             }
             (at.len() >= need && moves >= bar).then(|| {
                 let most = at
