@@ -2147,13 +2147,21 @@ fn diagnose_split(
                 && !d.refit
             {
                 let d_rms = rms_of(&d.mse);
+                // (alike: pooled, or near the floor in every record, where the pooled shares
+                // left are both noise and their ratio says nothing: a shape that leaves no
+                // more than `STATIC_TELL_RATIO` times the drift's power above the floor, plus
+                // one noise variance, in any record does the drift's work; families case
+                // 10292, a 0.75 % scale beside a Bouc-Wen loop on one long sine, named a
+                // drift that left 1.01 mV where the scale left 1.02 mV, over a 1.01 mV floor)
                 let rival = scored
                     .iter()
                     .filter(|x| {
                         x.3 && !x.0.refit
                             && STATIC_SHAPES.contains(&x.0.effect.as_str())
                             && x.2 * STATIC_TELL_RATIO >= *d_ex
-                            && (1.0 - x.2).max(1e-12) <= STATIC_TELL_RATIO * (1.0 - d_ex).max(1e-12)
+                            && ((1.0 - x.2).max(1e-12)
+                                <= STATIC_TELL_RATIO * (1.0 - d_ex).max(1e-12)
+                                || leaves_within_of(&x.0.mse, &d.mse, &var, STATIC_TELL_RATIO))
                     })
                     .min_by(|a, b| a.1.total_cmp(&b.1))
                     .map(|x| (x.0.effect.clone(), x.2, rms_of(&x.0.mse)));
