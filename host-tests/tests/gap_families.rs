@@ -706,7 +706,10 @@ fn suite_meets([exact_pct, false_pct, cut_pct, said_pct]: [f64; 4], rates: bool,
         return;
     };
     assert_eq!(all.clean_named, 0, "clean records must get no name");
-    assert_eq!(all.refused, 0, "drawn cases the diagnosis refused (REFUSED lines)");
+    assert_eq!(
+        all.refused, 0,
+        "drawn cases the diagnosis refused (REFUSED lines)"
+    );
     if !cfg!(debug_assertions) && rates {
         assert!(all.cases >= 100, "{} cases, at least 100", all.cases);
         assert!(
