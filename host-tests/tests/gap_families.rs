@@ -26,6 +26,8 @@
 //! The workflow starts from `thesis-linear` and is told nothing else. A case is exact when the
 //! named set equals the truth's set of catalogue names. `GAP_DEBUG=1` prints each case's table;
 //! `GAP_DUMP=DIR` writes each case's records to `DIR/SEED-NAME` (`1037-sine.csv`, for `piezo gap`).
+//! A case whose records the diagnosis refuses (an error, not a diagnosis) prints a `REFUSED`
+//! line with its seed, counts as naming nothing, and fails the suite's test.
 
 mod families;
 
