@@ -303,24 +303,26 @@ fn run_case(seed: u64) -> Outcome {
     let case = Case::draw(seed);
     let data = case.records();
     let base = ModelFile::built_in("thesis-linear").unwrap();
+    // (the case's outcome from what the diagnosis named and reported)
+    let outcome = |named, reported, final_over_floor, cuts, refused| Outcome {
+        family: case.protocol.family,
+        truth: case.effects.iter().map(|s| s.to_string()).collect(),
+        forms: case.forms(),
+        named,
+        reported,
+        final_over_floor,
+        cuts,
+        describe: case.describe(),
+        seconds: started.elapsed().as_secs_f64(),
+        refused,
+    };
     // (a refusal of a drawn case is a failure of the workflow: counted, named with its seed
     // to rerun it, and the rest of the run still measured)
     let d = match diagnose(&base, &data, &Options::default()) {
         Ok(d) => d,
         Err(e) => {
             println!("REFUSED seed {seed} truth {:?}: {e:#}", case.effects);
-            return Outcome {
-                family: case.protocol.family,
-                truth: case.effects.iter().map(|s| s.to_string()).collect(),
-                forms: case.forms(),
-                named: Vec::new(),
-                reported: Vec::new(),
-                final_over_floor: f64::INFINITY,
-                cuts: Vec::new(),
-                describe: case.describe(),
-                seconds: started.elapsed().as_secs_f64(),
-                refused: true,
-            };
+            return outcome(Vec::new(), Vec::new(), f64::INFINITY, Vec::new(), true);
         }
     };
     if std::env::var("GAP_DEBUG").is_ok() {
@@ -368,18 +370,13 @@ fn run_case(seed: u64) -> Outcome {
         .filter(|c| !c.why.starts_with(gap::STANDING_OFFSET_NOTE))
         .flat_map(|c| [c.named.clone(), c.alternative.clone()])
         .collect();
-    Outcome {
-        family: case.protocol.family,
-        truth: case.effects.iter().map(|s| s.to_string()).collect(),
-        forms: case.forms(),
+    outcome(
         named,
         reported,
-        final_over_floor: d.final_rms_v / d.noise_floor_v,
+        d.final_rms_v / d.noise_floor_v,
         cuts,
-        describe: case.describe(),
-        seconds: started.elapsed().as_secs_f64(),
-        refused: false,
-    }
+        false,
+    )
 }
 
 /// Tallies of one group of cases (a family, a form, or all).

@@ -852,11 +852,28 @@ fn creep_and_loop(
     sigs: &signatures::Signatures,
 ) -> Option<Candidate> {
     let shown = tails_and_gap_shown(sigs) && sigs.held_loop_v >= HELD_LOOP_OVER_TAIL * sigs.tail_v;
-    if !shown || CREEP_AND_LOOP.iter().any(|e| catalogue::present(model, e)) {
+    if !shown {
         return None;
     }
-    let fitted = fit_slow_set(model, data, slow_x, &CREEP_AND_LOOP, u_range)?;
-    Some(joint_candidate(&CREEP_AND_LOOP, fitted))
+    Some(joint_candidate(
+        &CREEP_AND_LOOP,
+        creep_and_loop_fit(model, data, slow_x, u_range)?,
+    ))
+}
+
+/// The creep and the loop fitted together beside `model`'s effects, where it has neither
+/// (the fit both joint offers make, [`creep_and_loop`] and
+/// [`creep_beside_loop_the_drift_cannot`]).
+fn creep_and_loop_fit(
+    model: &ModelFile,
+    data: &[Data],
+    slow_x: &SlowRegressors,
+    u_range: (f64, f64),
+) -> Option<Fitted> {
+    if CREEP_AND_LOOP.iter().any(|e| catalogue::present(model, e)) {
+        return None;
+    }
+    fit_slow_set(model, data, slow_x, &CREEP_AND_LOOP, u_range)
 }
 
 /// Do the holds show a creep's tails and a held levels' gap, each by the signatures' own bar
@@ -884,12 +901,10 @@ fn creep_beside_loop_the_drift_cannot(
     let alone = |e: &str| tried.iter().find(|t| t.0 == e && !t.1);
     let drift_none = alone("drift").is_some_and(|d| d.3 < MIN_EXPLAINED);
     let table_some = alone("hysteresis").is_some_and(|h| h.2 < 0.0 && h.3 >= MIN_EXPLAINED);
-    if !(shown && drift_none && table_some)
-        || CREEP_AND_LOOP.iter().any(|e| catalogue::present(model, e))
-    {
+    if !(shown && drift_none && table_some) {
         return None;
     }
-    let fitted = fit_slow_set(model, data, slow_x, &CREEP_AND_LOOP, u_range)?;
+    let fitted = creep_and_loop_fit(model, data, slow_x, u_range)?;
     // (nor a static shape's beside a creep: a creep beside a scale, on random levels from a
     // random first level, left the drift alone nothing as well, and the table beside it took
     // the scale's part; the pair then led the steps to a false offset at 4.4x the floor,
