@@ -840,16 +840,7 @@ fn centred_start_told(
     let Some(table) = model.hysteresis.as_ref().and_then(|h| h.table().ok()) else {
         return false;
     };
-    let state_after = |hist: &[f32]| -> Vec<(Vec<u32>, u32)> {
-        data.iter()
-            .map(|d| {
-                let mut a = HysteresisMemory::new();
-                a.reset_after(&table, hist, d.u_v[0] as f32);
-                let points = a.turning_points_v().map(f32::to_bits).collect();
-                (points, a.output_v().to_bits())
-            })
-            .collect()
-    };
+    let state_after = |hist: &[f32]| start::state_after(&table, data, hist);
     // (a rival that leaves the table as the present start does at every first input is the
     // present start to the records, and reads the same level: no rival)
     let now = model

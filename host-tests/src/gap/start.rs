@@ -128,6 +128,24 @@ fn head(d: &Data, k: usize) -> Data {
     }
 }
 
+/// The state `table` is left in at each record's first input after the memory `hist`
+/// (turning points, volts), as bits: two memories with the same state are one start to the
+/// records (the move to the first input wiped out where they differ).
+pub(super) fn state_after(
+    table: &HysteresisTable,
+    data: &[Data],
+    hist: &[f32],
+) -> Vec<(Vec<u32>, u32)> {
+    data.iter()
+        .map(|d| {
+            let mut a = HysteresisMemory::new();
+            a.reset_after(table, hist, d.u_v[0] as f32);
+            let points = a.turning_points_v().map(f32::to_bits).collect();
+            (points, a.output_v().to_bits())
+        })
+        .collect()
+}
+
 /// The best start memory for the fitted `model` (which has a `[hysteresis]` table fitted on
 /// `slow_x`), with the slow effects refitted on it; `None` if no candidate does better than
 /// the present start.
@@ -151,16 +169,7 @@ pub fn search(
         // Candidates that leave the table in the same state at every record's first input
         // (the move there wiped out where they differ) are one: the first is kept, so that
         // the few refitted on a single record are different starts.
-        let state_after = |hist: &[f32]| -> Vec<(Vec<u32>, u32)> {
-            data.iter()
-                .map(|d| {
-                    let mut a = HysteresisMemory::new();
-                    a.reset_after(&table, hist, d.u_v[0] as f32);
-                    let points = a.turning_points_v().map(f32::to_bits).collect();
-                    (points, a.output_v().to_bits())
-                })
-                .collect()
-        };
+        let state_after = |hist: &[f32]| state_after(&table, data, hist);
         let state_of = |c: &[f64]| {
             let hist: Vec<f32> = start_memory(slow_x.range(), slow_x.form(), c)
                 .iter()
