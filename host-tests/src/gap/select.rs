@@ -867,27 +867,17 @@ fn centred_start_told(
             new
         })
         .collect();
-    let n_all: f64 = data.iter().map(|d| d.len() as f64).sum();
-    let bar = start::START_PARAMS as f64 * n_all.ln();
+    let bar = start::start_worth(data);
     // The score of each rival against the present start: below the bar, the records do not
     // show the centred start (a rival that fails to refit is no rival). In chunks, the first
     // rival under the bar ends the search (each is a refit of the slow effects).
     let score = |c: &Vec<f64>| {
-        let x2 = slow_x.with_start(data, c);
-        let mut m2 = model.clone();
-        if let Some(h) = m2.hysteresis.as_mut() {
-            let full = super::everett::start_memory(range, form, c);
-            h.start_turns_v = (!full.is_empty()).then_some(full);
-        }
-        let m2 = refit_slow(&m2, &[], data, &x2, u_range)?;
-        data.iter()
-            .zip(cur_mse)
-            .map(|(d, now)| {
-                let y = super::data::sim(&m2, d).ok()?;
-                let ms = super::data::mse(&d.y_v, &y);
-                Some(d.len() as f64 * (ms.max(MSE_MIN_V2) / now.max(MSE_MIN_V2)).ln())
-            })
-            .sum::<Option<f64>>()
+        let (_, m2) = start::refit_on_start(model, data, slow_x, u_range, c)?;
+        let ms: Vec<f64> = data
+            .iter()
+            .map(|d| Some(super::data::mse(&d.y_v, &super::data::sim(&m2, d).ok()?)))
+            .collect::<Option<_>>()?;
+        Some(start::log_likelihood_cost(data, &ms, cur_mse))
     };
     cands.chunks(RIVAL_CHUNK).all(|chunk| {
         par_map(chunk, score)

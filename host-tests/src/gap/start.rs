@@ -146,6 +146,42 @@ pub(super) fn state_after(
         .collect()
 }
 
+/// `model` with the start memory `start_v` (turning points after coming up from the bottom,
+/// [`start_candidates`]) and the slow effects refitted on it, with the regressors built from
+/// that memory.
+pub(super) fn refit_on_start(
+    model: &ModelFile,
+    data: &[Data],
+    slow_x: &SlowRegressors,
+    u_range: (f64, f64),
+    start_v: &[f64],
+) -> Option<(SlowRegressors, ModelFile)> {
+    let x2 = slow_x.with_start(data, start_v);
+    let mut m2 = model.clone();
+    if let Some(h) = m2.hysteresis.as_mut() {
+        let full = start_memory(slow_x.range(), slow_x.form(), start_v);
+        h.start_turns_v = (!full.is_empty()).then_some(full);
+    }
+    let m2 = refit_slow(&m2, &[], data, &x2, u_range)?;
+    Some((x2, m2))
+}
+
+/// The BIC's fit term of mean squares `ms` against `ms_now` over the records (each record's
+/// length times the log of its ratio, summed): below zero, `ms` fits better.
+pub(super) fn log_likelihood_cost(data: &[Data], ms: &[f64], ms_now: &[f64]) -> f64 {
+    data.iter()
+        .zip(ms.iter().zip(ms_now))
+        .map(|(d, (a, b))| d.len() as f64 * (a.max(MSE_MIN_V2) / b.max(MSE_MIN_V2)).ln())
+        .sum()
+}
+
+/// A start memory's worth in the BIC over the records: [`START_PARAMS`] times the log of
+/// their samples.
+pub(super) fn start_worth(data: &[Data]) -> f64 {
+    let n_all: f64 = data.iter().map(|d| d.len() as f64).sum();
+    START_PARAMS as f64 * n_all.ln()
+}
+
 /// The best start memory for the fitted `model` (which has a `[hysteresis]` table fitted on
 /// `slow_x`), with the slow effects refitted on it; `None` if no candidate does better than
 /// the present start.
@@ -292,13 +328,7 @@ pub fn search(
                 Some(cf) if gain_of(cf).is_some_and(|gf| gf < g) => cf.clone(),
                 _ => c.clone(),
             };
-            let x2 = slow_x.with_start(data, &c);
-            let mut m2 = model.clone();
-            if let Some(h) = m2.hysteresis.as_mut() {
-                let full = start_memory(slow_x.range(), slow_x.form(), &c);
-                h.start_turns_v = (!full.is_empty()).then_some(full);
-            }
-            let m2 = refit_slow(&m2, &[], data, &x2, u_range)?;
+            let (x2, m2) = refit_on_start(&model, data, slow_x, u_range, &c)?;
             let sims: Vec<Vec<f64>> = par_map(data, |d| sim(&m2, d).ok())
                 .into_iter()
                 .collect::<Option<_>>()?;
@@ -325,13 +355,7 @@ pub fn search(
         // Charged in full also where it replaces an earlier start (the second round): a swap
         // that gains less than a start's worth is the same chase (our assumption, on the
         // conservative side: a start is kept only where the records show it).
-        let n_all: f64 = data.iter().map(|d| d.len() as f64).sum();
-        let score: f64 = data
-            .iter()
-            .zip(ms.iter().zip(&ms_now))
-            .map(|(d, (a, b))| d.len() as f64 * (a.max(MSE_MIN_V2) / b.max(MSE_MIN_V2)).ln())
-            .sum::<f64>()
-            + START_PARAMS as f64 * n_all.ln();
+        let score = log_likelihood_cost(data, &ms, &ms_now) + start_worth(data);
         if !no_worse || ms.iter().sum::<f64>() >= ms_now.iter().sum::<f64>() || score >= 0.0 {
             break;
         }
