@@ -2000,6 +2000,46 @@ fn an_off_centre_start_is_not_read_as_a_sensor_offset() {
     }
 }
 
+/// A scale no sensor or stage could have is not named (session 64,
+/// `catalogue::implausible`). Fresh seed 11178: a Prandtl-Ishlinskii loop of 14.6 % whose
+/// branches run backwards after each reversal (least slope -3.87), no Everett table's form,
+/// with a 23 mV offset, on eight random levels that read no zero. Beside the table a
+/// `sensor-gain` of 0.438 took 97 % of what was left (19.4x the floor), a scale far outside
+/// a sensor's calibration. Now the step leaves it out and says why; the table's own centre
+/// line takes what a scale within the range can (step 19), the offset is reported as one the
+/// records cannot tell from the table, and the unexplained part and its backward branches
+/// are said. Written on this case: a guard of the rule.
+#[test]
+fn a_scale_no_sensor_could_have_is_not_named() {
+    let (d, named) = diagnosed_sorted(11178);
+    assert_eq!(named, ["hysteresis"], "{}", d.table());
+    let (lo, hi) = host_tests::gap::constants::SENSOR_GAIN_RANGE;
+    assert!(
+        d.model
+            .sensor_gain
+            .as_ref()
+            .is_none_or(|g| (lo..=hi).contains(&g.gain)),
+        "{}",
+        d.table()
+    );
+    assert!(
+        d.not_searched
+            .iter()
+            .flatten()
+            .any(|(e, why)| e == "sensor-gain" && why.contains("outside")),
+        "{}",
+        d.trace()
+    );
+    assert!(
+        d.cannot_tell
+            .iter()
+            .any(|c| c.named == "hysteresis" && c.alternative == "offset"),
+        "{}",
+        d.table()
+    );
+    assert!(d.unexplained.is_some(), "{}", d.table());
+}
+
 /// The drawn case `seed` diagnosed from `thesis-linear`, and its named set sorted.
 fn diagnosed_sorted(seed: u64) -> (gap::Diagnosis, Vec<String>) {
     let base = ModelFile::built_in("thesis-linear").unwrap();

@@ -19,6 +19,7 @@
 //! Every candidate is then checked the same way: the whole augmented model is simulated on
 //! every record by [`model_core::stage::Stage`] (never by a second simulator) and scored.
 
+use super::constants::SENSOR_GAIN_RANGE;
 use crate::io::model_file::{
     DelaySection, DriftSection, GainSection, ModelFile, OffsetSection, PoleSection,
     ResonanceSection, SaturationSection, SensorGainSection, SlewSection,
@@ -62,6 +63,21 @@ pub const FAST: [&str; 5] = [
 pub const DRIFT_TAU_GRID_S: [f64; 14] = [
     0.005, 0.01, 0.02, 0.05, 0.1, 0.2, 0.5, 1.0, 2.0, 5.0, 10.0, 20.0, 50.0, 200.0,
 ];
+
+/// Why a candidate `m` fitted from `base` names a value no stage or sensor could have, if it
+/// does: a `sensor-gain` new in `m` (or changed from `base`'s) outside [`SENSOR_GAIN_RANGE`].
+/// Such a candidate is not admitted, whatever it explains.
+pub fn implausible(m: &ModelFile, base: &ModelFile) -> Option<String> {
+    let g = m.sensor_gain.as_ref()?.gain;
+    let changed = base.sensor_gain.as_ref().is_none_or(|b| b.gain != g);
+    let (lo, hi) = SENSOR_GAIN_RANGE;
+    (changed && !(lo..=hi).contains(&g)).then(|| {
+        format!(
+            "its fitted scale {g:.3} is outside {lo}-{hi}, what a sensor's calibration and the \
+             stage's gain spread could give: a scale standing in for a form the model lacks"
+        )
+    })
+}
 
 /// Is `effect` present in `m`?
 pub fn present(m: &ModelFile, effect: &str) -> bool {

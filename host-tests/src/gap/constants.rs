@@ -451,6 +451,17 @@ pub const HOLD_MIN_S: f64 = 0.2;
 /// it).
 pub const HOLD_BAND_SIGMAS: f64 = 10.0;
 
+/// The sensor scales a `sensor-gain` may name, and step 19 searches for a table's centre
+/// line (our assumption: a lab calibrates its sensor to a model within 20 %, either way: the
+/// E-509 holds its own scale to a per cent or two, and the stage's gain, which a scale beside
+/// the model's static map also takes, spreads by some 20 % from unit to unit and with load
+/// and temperature (PI quotes open-loop travel to +20/-0 %). A scale farther off is a wrong
+/// unit or a wrong model, or a fit's way to stand in for a form the model lacks: families
+/// case 11178, a Prandtl-Ishlinskii loop whose branches run backwards after each reversal,
+/// named a `sensor-gain` of 0.438 beside a table no Everett form could make follow it. The
+/// suite's truths draw their scales within 5 %).
+pub const SENSOR_GAIN_RANGE: (f64, f64) = (0.8, 1.25);
+
 /// Records without holds cannot tell a drift from a hysteresis loop at low frequency when the
 /// other effect, fitted in the named one's place, leaves every record's residual within this
 /// factor of the named one's (RMS; our assumption: a quarter more is within what a misfit of

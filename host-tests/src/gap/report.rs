@@ -129,7 +129,7 @@ impl Diagnosis {
         for (i, t) in self.tried.iter().enumerate() {
             s.push_str(&format!("  tried at step {}: {t:?}\n", i + 1));
             if let Some(left) = self.not_searched.get(i).filter(|l| !l.is_empty()) {
-                s.push_str(&format!("  not searched at step {}: {left:?}\n", i + 1));
+                s.push_str(&format!("  left out at step {}: {left:?}\n", i + 1));
             }
         }
         let mv = |v: &[f64]| v.iter().map(|x| x * 1e3).collect::<Vec<_>>();
@@ -620,7 +620,7 @@ pub fn write(dir: &Path, base: &ModelFile, data: &[Data], d: &Diagnosis) -> anyh
         }
         if let Some(left) = d.not_searched.get(i).filter(|l| !l.is_empty()) {
             for (e, why) in left {
-                let _ = write!(h, "{} (not searched: {}); ", esc(e), esc(why));
+                let _ = write!(h, "{} (left out: {}); ", esc(e), esc(why));
             }
         }
         h.push_str("</p>");

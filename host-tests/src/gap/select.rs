@@ -18,7 +18,7 @@ use super::constants::{
     PAIR_FLOOR_RATIO, PRUNE_KEEP_EXCESS_VAR, PRUNE_PER_PARAM, PRUNE_RATIO, REFIT_ALL_SHARE,
     REST_ZERO_INPUT_V, REST_ZERO_SHOWN_MIN, REST_ZERO_SIGMAS, REVERSED_CORRELATION,
     REVERSED_MIN_FLOORS, RISE_CHOICE_RATIO, SAME_READING_FLOORS, SCALE_APART_MAX,
-    STATIC_TELL_RATIO, STOP_FLOOR_RATIO, STRUCTURE_ROUNDS,
+    SENSOR_GAIN_RANGE, STATIC_TELL_RATIO, STOP_FLOOR_RATIO, STRUCTURE_ROUNDS,
 };
 use super::cycle_noise::cycle_bar_v;
 use super::data::{
@@ -131,8 +131,10 @@ pub struct Diagnosis {
     pub model: ModelFile,
     /// Candidates tried at each step: (effect, score, explained fraction, admissible).
     pub tried: Vec<Vec<(String, f64, f64, bool)>>,
-    /// The fast effects each step did not search, and why: no fit of them could pass the
-    /// step's gate on its residual ([`signatures::Signatures::search_left_out`]).
+    /// The candidates each step left out, and why: the fast effects it did not search (no fit
+    /// of them could pass the step's gate on its residual,
+    /// [`signatures::Signatures::search_left_out`]), and those it fitted to a value no stage
+    /// or sensor could have ([`catalogue::implausible`]), which it did not admit.
     pub not_searched: Vec<Vec<(String, String)>>,
     /// Signature checks of the base model's residual.
     pub signatures: signatures::Signatures,
@@ -603,10 +605,9 @@ fn centre_line_into_table(model: &ModelFile) -> Option<ModelFile> {
     Some(m)
 }
 
-/// The scales step 19 searches (our assumption: a lab's calibration of its sensor to a model
-/// within 20 %; farther is a wrong unit or a wrong model, which the refusals and a named
-/// `sensor-gain` say).
-const CENTRE_SCALES: (f64, f64) = (0.8, 1.25);
+/// The scales step 19 searches: those a `sensor-gain` may name (a wrong unit or a wrong model
+/// farther off, which the refusals say).
+const CENTRE_SCALES: (f64, f64) = SENSOR_GAIN_RANGE;
 
 /// How much wider than the table fitted without it step 19 lets a scale make the table's
 /// major loop over its whole range (our assumption, [`CANNOT_TELL_RATIO`]'s 1.25): beside a
@@ -2112,12 +2113,18 @@ fn diagnose_split(
                         mse: mse_v,
                     };
                     let (score, explained, harmless) = judge(&c, &all_set);
-                    let ok = score < 0.0 && explained >= MIN_EXPLAINED && harmless;
+                    let ok = score < 0.0
+                        && explained >= MIN_EXPLAINED
+                        && harmless
+                        && catalogue::implausible(&c.model, &model).is_none();
                     Some((c, score, explained, ok))
                 })
                 .collect()
         };
         let mut scored = Vec::new();
+        // Candidates fitted to a value no stage or sensor could have (`catalogue::implausible`)
+        // that would otherwise have been admitted, and why, for the trace.
+        let mut unsearched_too: Vec<(String, String)> = Vec::new();
         // The look-alikes a pair step stands for (`static_pairs`).
         let mut pair_note: Option<Vec<String>> = None;
         // (step 16: the memoryless twin of an admissible new table, for the trace)
@@ -2130,7 +2137,17 @@ fn diagnose_split(
             };
             let (score, explained, harmless) = judge(&c, set);
             let sig_ok = c.effect.split('+').all(|e| sigs.supports(e, &c.model));
-            let admissible = score < 0.0 && explained >= MIN_EXPLAINED && harmless;
+            // (a value no stage or sensor could have is a misfit of another form, whatever it
+            // explains: said in the trace)
+            let implausible = catalogue::implausible(&c.model, &model);
+            let admissible =
+                score < 0.0 && explained >= MIN_EXPLAINED && harmless && implausible.is_none();
+            if let Some(why) = implausible
+                && score < 0.0
+                && explained >= MIN_EXPLAINED
+            {
+                unsearched_too.push((c.effect.clone(), why));
+            }
             let mut ok = admissible && sig_ok;
             // Steps 16 and 16a: a table is memory, and the memoryless twin (the best map of
             // the input alone, `memory`) reads its gate. Step 16: where the signatures show a
@@ -2219,6 +2236,7 @@ fn diagnose_split(
             unsearched
                 .iter()
                 .map(|(e, why)| (e.to_string(), why.to_string()))
+                .chain(unsearched_too)
                 .collect(),
         );
         // Without a hold in any record, a drift's only evidence is a slow residual under the
