@@ -757,6 +757,70 @@ fn thesis_stage_on_random_levels(cases: &[(u64, f64, f64, f64, f64, f64)]) {
     }
 }
 
+/// A step response, the record a lab makes first: the full thesis stage from rest at 0 V to
+/// one level held for the whole 10 s record (session 64). Low steps (2-4.5 V) named nothing
+/// at 46-70x the floor: the scale, the curvature and the offset each explained 67-68 % of
+/// the residual, alike, so none was named, and the drift alone explained nothing (its
+/// non-negative gains cannot take its tails beside a static level of the other sign). Now
+/// the drift is fitted beside each look-alike as one step. One level cannot tell a scale
+/// from a curvature, so a static shape named there must come with the pair it is a guess
+/// between; without a reversal no loop is named. Measured: 2 V 0.99x, 4.5 V 1.06x (drift
+/// and a shape, the pair said); 7 V drift alone at 3.69x (the look-alikes unnamed, said).
+#[test]
+fn a_step_response_names_its_creep_and_says_what_one_level_cannot_tell() {
+    use host_tests::sim::synth::{Protocol, SynthSpec, synth};
+    let base = ModelFile::built_in("thesis-linear").unwrap();
+    // (seed, rate Hz, level V)
+    for (seed, rate, level) in [(61, 5_000.0, 2.0), (62, 2_000.0, 4.5), (63, 5_000.0, 7.0)] {
+        let spec = SynthSpec {
+            model: "thesis-full".into(),
+            protocol: Protocol::Steps,
+            seed,
+            seconds: 10.0,
+            rate,
+            amplitude: level,
+            offset: 0.0,
+            freq: 1.0,
+            freq_end: 100.0,
+            hold: None,
+            noise_v: None,
+        };
+        let data = vec![Data::from_record("step.csv", synth(&spec).unwrap()).unwrap()];
+        let d = diagnose(&base, &data, &Options::default()).unwrap();
+        let ratio = d.final_rms_v / d.noise_floor_v;
+        println!(
+            "{level} V: named {:?}, final {ratio:.2}x the floor",
+            d.named
+        );
+        let table = d.table();
+        assert!(d.named.iter().any(|n| n == "drift"), "{level} V\n{table}");
+        assert!(
+            !d.named.iter().any(|n| n == "hysteresis"),
+            "{level} V\n{table}"
+        );
+        let shapes: Vec<&String> = d
+            .named
+            .iter()
+            .filter(|n| ["offset", "sensor-gain", "nonlinear-gain"].contains(&n.as_str()))
+            .collect();
+        for n in &shapes {
+            assert!(
+                d.cannot_tell
+                    .iter()
+                    .any(|c| &&c.named == n || &&c.alternative == n),
+                "{level} V: {n} named with no pair\n{table}"
+            );
+        }
+        // (a shape named beside the creep takes the level: near the floor; none named, the
+        // pair the records cannot tell is said instead)
+        if shapes.is_empty() {
+            assert!(!d.cannot_tell.is_empty(), "{level} V\n{table}");
+        } else {
+            assert!(ratio <= 1.5, "{level} V: {ratio:.2}x\n{table}");
+        }
+    }
+}
+
 /// The full thesis stage on random levels with few long holds (1.5-3 s), drawn after
 /// session 29's two changes were made on other records (seeds 44 and 50): its rises went to
 /// high levels, so no record's held levels could tell a loop from a static shape
