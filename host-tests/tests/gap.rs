@@ -724,28 +724,34 @@ fn the_thesis_stage_on_random_levels_names_its_loop_beside_its_drift() {
     ]);
 }
 
+/// The full thesis stage's record of `piezo synth --protocol steps` (one step from rest at
+/// 0 V, then levels drawn over `offset + [0, amplitude]` V every `hold` s; without one, the
+/// first level held to the end), `seconds` long at `rate` Hz, noise seed `seed`.
+fn thesis_stage_steps(
+    seed: u64,
+    seconds: f64,
+    rate: f64,
+    (offset, amplitude): (f64, f64),
+    hold: Option<f64>,
+) -> Vec<Data> {
+    use host_tests::sim::synth::{SynthSpec, synth};
+    let spec = SynthSpec::steps(
+        "thesis-full",
+        (seed, seconds, rate),
+        (offset, amplitude),
+        hold,
+    );
+    vec![Data::from_record("steps.csv", synth(&spec).unwrap()).unwrap()]
+}
+
 /// The full thesis stage's random-levels records (`piezo synth --model thesis-full
 /// --protocol steps`), one per case `(seed, seconds, rate Hz, lowest input V, span V, hold
 /// s)`, each diagnosed alone from `thesis-linear`: drift and hysteresis named, nothing the
 /// stage lacks, within the 2x of the floor for a single record.
 fn thesis_stage_on_random_levels(cases: &[(u64, f64, f64, f64, f64, f64)]) {
-    use host_tests::sim::synth::{Protocol, SynthSpec, synth};
     let base = ModelFile::built_in("thesis-linear").unwrap();
     for &(seed, seconds, rate, offset, amplitude, hold) in cases {
-        let spec = SynthSpec {
-            model: "thesis-full".into(),
-            protocol: Protocol::Steps,
-            seed,
-            seconds,
-            rate,
-            amplitude,
-            offset,
-            freq: 1.0,
-            freq_end: 100.0,
-            hold: Some(hold),
-            noise_v: None,
-        };
-        let data = vec![Data::from_record("steps.csv", synth(&spec).unwrap()).unwrap()];
+        let data = thesis_stage_steps(seed, seconds, rate, (offset, amplitude), Some(hold));
         let d = diagnose(&base, &data, &Options::default()).unwrap();
         let ratio = d.final_rms_v / d.noise_floor_v;
         println!(
@@ -768,24 +774,10 @@ fn thesis_stage_on_random_levels(cases: &[(u64, f64, f64, f64, f64, f64)]) {
 /// and a shape, the pair said); 7 V drift alone at 3.69x (the look-alikes unnamed, said).
 #[test]
 fn a_step_response_names_its_creep_and_says_what_one_level_cannot_tell() {
-    use host_tests::sim::synth::{Protocol, SynthSpec, synth};
     let base = ModelFile::built_in("thesis-linear").unwrap();
     // (seed, rate Hz, level V)
     for (seed, rate, level) in [(61, 5_000.0, 2.0), (62, 2_000.0, 4.5), (63, 5_000.0, 7.0)] {
-        let spec = SynthSpec {
-            model: "thesis-full".into(),
-            protocol: Protocol::Steps,
-            seed,
-            seconds: 10.0,
-            rate,
-            amplitude: level,
-            offset: 0.0,
-            freq: 1.0,
-            freq_end: 100.0,
-            hold: None,
-            noise_v: None,
-        };
-        let data = vec![Data::from_record("step.csv", synth(&spec).unwrap()).unwrap()];
+        let data = thesis_stage_steps(seed, 10.0, rate, (0.0, level), None);
         let d = diagnose(&base, &data, &Options::default()).unwrap();
         let ratio = d.final_rms_v / d.noise_floor_v;
         println!(

@@ -1138,7 +1138,7 @@ fn a_creep_and_a_loop_together_are_both_named() {
 /// on none, and `drift` on every one.
 #[test]
 fn a_creep_alone_on_few_long_holds_takes_no_loop() {
-    use host_tests::sim::synth::{Protocol as Synth, SynthSpec, synth};
+    use host_tests::sim::synth::{SynthSpec, synth};
     if cfg!(debug_assertions) {
         return;
     }
@@ -1155,19 +1155,12 @@ fn a_creep_alone_on_few_long_holds_takes_no_loop() {
     let mut lines = Vec::new();
     let mut failed = Vec::new();
     for (i, (seed, seconds, rate, offset, amplitude, hold)) in inputs.into_iter().enumerate() {
-        let spec = SynthSpec {
-            model: "thesis-linear".into(),
-            protocol: Synth::Steps,
-            seed,
-            seconds,
-            rate,
-            amplitude,
-            offset,
-            freq: 1.0,
-            freq_end: 100.0,
-            hold: Some(hold),
-            noise_v: None,
-        };
+        let spec = SynthSpec::steps(
+            "thesis-linear",
+            (seed, seconds, rate),
+            (offset, amplitude),
+            Some(hold),
+        );
         let rec = synth(&spec).unwrap();
         let protocol = Protocol {
             family: Family::RandomLevels,

@@ -998,6 +998,28 @@ fn creep_beside_loop_the_drift_cannot(
     Some(joint_candidate(&CREEP_AND_LOOP, fitted))
 }
 
+/// Candidates a step judged beside its own (each with its score, explained share and
+/// whether it is admissible) added to the step's trace (`tried`), and the index of the best
+/// admissible by the score.
+fn traced_best(
+    tried: &mut [Vec<(String, f64, f64, bool)>],
+    judged: &[(Candidate, f64, f64, bool)],
+) -> Option<usize> {
+    if let Some(t) = tried.last_mut() {
+        t.extend(
+            judged
+                .iter()
+                .map(|(c, sc, ex, ok)| (c.effect.clone(), *sc, *ex, *ok)),
+        );
+    }
+    judged
+        .iter()
+        .enumerate()
+        .filter(|(_, x)| x.3)
+        .min_by(|a, b| a.1.1.total_cmp(&b.1.1))
+        .map(|(i, _)| i)
+}
+
 /// Effects fitted together as one step's candidate (`a+b`), its score counting the
 /// parameters of each.
 fn joint_candidate(effects: &[&str], (model, sims, mse): Fitted) -> Candidate {
@@ -2534,22 +2556,9 @@ fn diagnose_split(
                     for x in judged.iter_mut() {
                         x.3 = x.3 && x.1 < best_dropped;
                     }
-                    if let Some(t) = tried.last_mut() {
-                        t.extend(
-                            judged
-                                .iter()
-                                .map(|(c, sc, ex, ok)| (c.effect.clone(), *sc, *ex, *ok)),
-                        );
-                    }
                     // The best admissible pair, told apart from every other (by the steps' own
                     // test).
-                    let best = judged
-                        .iter()
-                        .enumerate()
-                        .filter(|(_, x)| x.3)
-                        .min_by(|a, b| a.1.1.total_cmp(&b.1.1))
-                        .map(|(i, _)| i);
-                    if let Some(i) = best {
+                    if let Some(i) = traced_best(&mut tried, &judged) {
                         let first = &judged[i];
                         let told = judged.iter().enumerate().all(|(j, q)| {
                             j == i || !explain_alike((first.2, &first.0.mse), (q.2, &q.0.mse), &var)
@@ -2606,20 +2615,7 @@ fn diagnose_split(
                             Some((c, score, explained, ok))
                         })
                         .collect();
-                    if let Some(t) = tried.last_mut() {
-                        t.extend(
-                            judged
-                                .iter()
-                                .map(|(c, sc, ex, ok)| (c.effect.clone(), *sc, *ex, *ok)),
-                        );
-                    }
-                    let best = judged
-                        .iter()
-                        .enumerate()
-                        .filter(|(_, x)| x.3)
-                        .min_by(|a, b| a.1.1.total_cmp(&b.1.1))
-                        .map(|(i, _)| i);
-                    if let Some(i) = best {
+                    if let Some(i) = traced_best(&mut tried, &judged) {
                         let shape = |c: &Candidate| c.effect["drift+".len()..].to_string();
                         let s = shape(&judged[i].0);
                         for (j, q) in judged.iter().enumerate() {

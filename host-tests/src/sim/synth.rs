@@ -73,6 +73,31 @@ pub struct SynthSpec {
 }
 
 impl SynthSpec {
+    /// A `steps` record of `model` (`piezo synth --protocol steps`): one step from rest at
+    /// `offset` V, then levels drawn over `offset + [0, amplitude]` V every `hold` s (without
+    /// one, the first level held to the end); `seconds` long at `rate` Hz, noise seed `seed`,
+    /// the model's own sensor noise.
+    pub fn steps(
+        model: &str,
+        (seed, seconds, rate): (u64, f64, f64),
+        (offset, amplitude): (f64, f64),
+        hold: Option<f64>,
+    ) -> Self {
+        Self {
+            model: model.into(),
+            protocol: Protocol::Steps,
+            seed,
+            seconds,
+            rate,
+            amplitude,
+            offset,
+            freq: 1.0,
+            freq_end: 100.0,
+            hold,
+            noise_v: None,
+        }
+    }
+
     /// Checks the parameters; every refusal names the flag.
     pub fn check(&self) -> anyhow::Result<()> {
         ensure!(
