@@ -1162,17 +1162,13 @@ fn a_creep_alone_on_few_long_holds_takes_no_loop() {
             Some(hold),
         );
         let rec = synth(&spec).unwrap();
-        let protocol = Protocol {
-            family: Family::RandomLevels,
-            records: vec![families::Input {
-                name: "levels.csv".into(),
-                t_s: rec.t_s.clone(),
-                u_v: rec.u_v.clone(),
-            }],
-            desc: format!("{rate:.0} Hz {seconds:.0} s, holds {hold} s"),
-            step_rate_hz: Some(rate),
-            holds: true,
-        };
+        let protocol = Protocol::one_record(
+            Family::RandomLevels,
+            "levels.csv",
+            (rec.t_s.clone(), rec.u_v.clone()),
+            format!("{rate:.0} Hz {seconds:.0} s, holds {hold} s"),
+            (Some(rate), true),
+        );
         let case_seed = 5401 + i as u64;
         let mut rng = StdRng::seed_from_u64(case_seed);
         let case = Case {
@@ -1814,17 +1810,13 @@ fn the_issues_single_sine_with_the_families_loops() {
             .iter()
             .map(|t| 5.0 - 4.5 * (2.0 * std::f64::consts::PI * t).cos())
             .collect();
-        let protocol = Protocol {
-            family: Family::LongSine,
-            records: vec![families::Input {
-                name: "sine.csv".into(),
-                t_s,
-                u_v,
-            }],
-            desc: "5 kHz 10 s, 1 Hz sine 5.0 +- 4.5 V".into(),
-            step_rate_hz: None,
-            holds: false,
-        };
+        let protocol = Protocol::one_record(
+            Family::LongSine,
+            "sine.csv",
+            (t_s, u_v),
+            "5 kHz 10 s, 1 Hz sine 5.0 +- 4.5 V".into(),
+            (None, false),
+        );
         let mut case = Case::of(seed, protocol, vec!["hysteresis", "offset"]);
         case.hysteresis = Some(hysteresis);
         case.offset_v = Some(offset_v);
@@ -2069,17 +2061,13 @@ fn a_step_response_of_other_creeps_names_nothing_false() {
             .iter()
             .map(|&t| if t < 0.1 { 0.0 } else { level })
             .collect();
-        let protocol = Protocol {
-            family: Family::RandomLevels,
-            records: vec![families::Input {
-                name: "step.csv".into(),
-                t_s,
-                u_v,
-            }],
-            desc: format!("one step to {level:.2} V, {rate:.0} Hz {seconds:.1} s"),
-            step_rate_hz: Some(rate),
-            holds: true,
-        };
+        let protocol = Protocol::one_record(
+            Family::RandomLevels,
+            "step.csv",
+            (t_s, u_v),
+            format!("one step to {level:.2} V, {rate:.0} Hz {seconds:.1} s"),
+            (Some(rate), true),
+        );
         // (the creep alone, or beside one static shape, in turn)
         let shape = ["", "offset", "sensor-gain", "nonlinear-gain"][(seed % 4) as usize];
         let mut effects = vec!["drift"];

@@ -94,6 +94,27 @@ pub struct Protocol {
 }
 
 impl Protocol {
+    /// A protocol of one record, `name`, whose input is `u_v` at the times `t_s`.
+    pub fn one_record(
+        family: Family,
+        name: &str,
+        (t_s, u_v): (Vec<f64>, Vec<f64>),
+        desc: String,
+        (step_rate_hz, holds): (Option<f64>, bool),
+    ) -> Self {
+        Self {
+            family,
+            records: vec![Input {
+                name: name.into(),
+                t_s,
+                u_v,
+            }],
+            desc,
+            step_rate_hz,
+            holds,
+        }
+    }
+
     /// The effects this protocol can show (the rule in the module note), in catalogue order.
     pub fn allowed(&self) -> Vec<&'static str> {
         let mut v = Vec::new();
