@@ -874,10 +874,7 @@ fn centred_start_told(
     // rival under the bar ends the search (each is a refit of the slow effects).
     let score = |c: &Vec<f64>| {
         let (_, m2) = start::refit_on_start(model, data, slow_x, u_range, c)?;
-        let ms: Vec<f64> = data
-            .iter()
-            .map(|d| Some(super::data::mse(&d.y_v, &super::data::sim(&m2, d).ok()?)))
-            .collect::<Option<_>>()?;
+        let (_, ms) = super::data::simulate_all(&m2, data).ok()?;
         Some(start::log_likelihood_cost(data, &ms, cur_mse))
     };
     cands.chunks(RIVAL_CHUNK).all(|chunk| {
@@ -2098,13 +2095,7 @@ fn diagnose_split(
         // record's excess within 3x of the current one.
         let judge = |c: &Candidate, set: &[usize]| -> (f64, f64, bool) {
             let n_set: usize = set.iter().map(|&i| data[i].len()).sum();
-            let score: f64 = set
-                .iter()
-                .map(|&i| {
-                    data[i].len() as f64
-                        * (c.mse[i].max(MSE_MIN_V2) / cur_mse[i].max(MSE_MIN_V2)).ln()
-                })
-                .sum::<f64>()
+            let score = start::log_likelihood_cost_over(data, &c.mse, &cur_mse, set)
                 + c.k as f64 * (n_set as f64).ln();
             let explained = explained_share(&cur_mse, &c.mse, &var, set);
             let harmless = (0..data.len()).all(|i| {

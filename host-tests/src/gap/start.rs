@@ -169,9 +169,20 @@ pub(super) fn refit_on_start(
 /// The BIC's fit term of mean squares `ms` against `ms_now` over the records (each record's
 /// length times the log of its ratio, summed): below zero, `ms` fits better.
 pub(super) fn log_likelihood_cost(data: &[Data], ms: &[f64], ms_now: &[f64]) -> f64 {
-    data.iter()
-        .zip(ms.iter().zip(ms_now))
-        .map(|(d, (a, b))| d.len() as f64 * (a.max(MSE_MIN_V2) / b.max(MSE_MIN_V2)).ln())
+    let all: Vec<usize> = (0..data.len()).collect();
+    log_likelihood_cost_over(data, ms, ms_now, &all)
+}
+
+/// [`log_likelihood_cost`] over the records `set` only (indices into `data`, `ms` and
+/// `ms_now`).
+pub(super) fn log_likelihood_cost_over(
+    data: &[Data],
+    ms: &[f64],
+    ms_now: &[f64],
+    set: &[usize],
+) -> f64 {
+    set.iter()
+        .map(|&i| data[i].len() as f64 * (ms[i].max(MSE_MIN_V2) / ms_now[i].max(MSE_MIN_V2)).ln())
         .sum()
 }
 
