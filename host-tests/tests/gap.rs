@@ -763,6 +763,34 @@ fn thesis_stage_on_random_levels(cases: &[(u64, f64, f64, f64, f64, f64)]) {
     }
 }
 
+/// The creep bound (`catalogue::implausible`, `CREEP_SHARE_MAX`) admits the thesis' own
+/// creep (sec. 5.2: `G_drift(0) K(u)`, at most 22 % of the plant's static reading over its
+/// 0-6 V range) with room for a stage that creeps twice as much, and refuses one that adds
+/// more than half the stage's reading: the thesis' drift with its gains scaled by 2 is
+/// admitted, by 3 refused, whatever the base model holds.
+#[test]
+fn the_creep_bound_admits_the_thesis_creep_and_refuses_a_lag_as_large_as_the_stage() {
+    let base = ModelFile::built_in("thesis-linear").unwrap();
+    let full = ModelFile::built_in("thesis-full").unwrap();
+    let thesis_drift = full.drift.clone().expect("the thesis' drift");
+    let with_gains = |k: f64| {
+        let mut m = base.clone();
+        let mut d = thesis_drift.clone();
+        d.gains.iter_mut().for_each(|g| *g *= k);
+        m.drift = Some(d);
+        m
+    };
+    for k in [1.0, 2.0] {
+        let m = with_gains(k);
+        assert_eq!(gap::catalogue::implausible(&m, &base), None, "gains x{k}");
+    }
+    let why = gap::catalogue::implausible(&with_gains(3.0), &base).expect("gains x3 refused");
+    assert!(why.contains("settled creep"), "{why}");
+    // (a drift the base already holds, unchanged, is the user's, not a fit's)
+    let absurd = with_gains(3.0);
+    assert_eq!(gap::catalogue::implausible(&absurd, &absurd), None);
+}
+
 /// A step response, the record a lab makes first: the full thesis stage from rest at 0 V to
 /// one level held for the whole 10 s record (session 64). Low steps (2-4.5 V) named nothing
 /// at 46-70x the floor: the scale, the curvature and the offset each explained 67-68 % of

@@ -19,7 +19,7 @@
 //! Every candidate is then checked the same way: the whole augmented model is simulated on
 //! every record by [`model_core::stage::Stage`] (never by a second simulator) and scored.
 
-use super::constants::SENSOR_GAIN_RANGE;
+use super::constants::{CREEP_SHARE_INPUTS_V, CREEP_SHARE_MAX, SENSOR_GAIN_RANGE};
 use crate::io::model_file::{
     DelaySection, DriftSection, GainSection, ModelFile, OffsetSection, PoleSection,
     ResonanceSection, SaturationSection, SensorGainSection, SlewSection,
@@ -65,9 +65,16 @@ pub const DRIFT_TAU_GRID_S: [f64; 14] = [
 ];
 
 /// Why a candidate `m` fitted from `base` names a value no stage or sensor could have, if it
-/// does: a `sensor-gain` new in `m` (or changed from `base`'s) outside [`SENSOR_GAIN_RANGE`].
+/// does: a `sensor-gain` new in `m` (or changed from `base`'s) outside [`SENSOR_GAIN_RANGE`],
+/// or a `drift` new in `m` (or changed) whose settled creep adds more than
+/// [`CREEP_SHARE_MAX`] of the stage's linear reading (the plant's static gain through the
+/// sensor) at one of [`CREEP_SHARE_INPUTS_V`].
 /// Such a candidate is not admitted, whatever it explains.
 pub fn implausible(m: &ModelFile, base: &ModelFile) -> Option<String> {
+    implausible_scale(m, base).or_else(|| implausible_creep(m, base))
+}
+
+fn implausible_scale(m: &ModelFile, base: &ModelFile) -> Option<String> {
     let g = m.sensor_gain.as_ref()?.gain;
     let changed = base.sensor_gain.as_ref().is_none_or(|b| b.gain != g);
     let (lo, hi) = SENSOR_GAIN_RANGE;
@@ -76,6 +83,35 @@ pub fn implausible(m: &ModelFile, base: &ModelFile) -> Option<String> {
             "its fitted scale {g:.3} is outside {lo}-{hi}, what a sensor's calibration and the \
              stage's gain spread could give: a scale standing in for a form the model lacks"
         )
+    })
+}
+
+fn implausible_creep(m: &ModelFile, base: &ModelFile) -> Option<String> {
+    let d = m.drift.as_ref()?;
+    if base.drift.as_ref() == Some(d) {
+        return None;
+    }
+    // (the stage's linear reading: a table's `static_output` is a branch of its loop from
+    // the table's bottom, not the reversible map, and a wide loop's reads a fraction of it)
+    let mut linear = m.clone();
+    linear.drift = None;
+    linear.hysteresis = None;
+    linear.hysteresis_play = None;
+    linear.nonlinear_gain = None;
+    CREEP_SHARE_INPUTS_V.iter().find_map(|&u| {
+        let creep_v = m.settled_creep_reading_v(u).ok()?;
+        let reading_v = linear.static_reading_v(u).ok()?;
+        let share = creep_v.abs() / reading_v.abs().max(f64::MIN_POSITIVE);
+        (share > CREEP_SHARE_MAX).then(|| {
+            format!(
+                "its settled creep at {u} V, {:.0} mV, is {:.0} % of the stage's linear reading \
+                 there (a creep of a piezo stage adds at most {:.0} %): a lag standing in for a \
+                 form the model lacks",
+                1e3 * creep_v,
+                1e2 * share,
+                1e2 * CREEP_SHARE_MAX
+            )
+        })
     })
 }
 
