@@ -766,8 +766,9 @@ fn thesis_stage_on_random_levels(cases: &[(u64, f64, f64, f64, f64, f64)]) {
 /// The creep bound (`catalogue::implausible`, `CREEP_SHARE_MAX`) admits the thesis' own
 /// creep (sec. 5.2: `G_drift(0) K(u)`, at most 22 % of the plant's static reading over its
 /// 0-6 V range) with room for a stage that creeps twice as much, and refuses one that adds
-/// more than half the stage's reading: the thesis' drift with its gains scaled by 2 is
-/// admitted, by 3 refused, whatever the base model holds.
+/// more than half the stage's reading: on the identification protocol's 150 s records the
+/// thesis' drift with its gains scaled by 2 is admitted, by 3 refused. It counts the lags the
+/// records settle: on one 10 s sine the 12 s lag is a ramp, and the same creep is admitted.
 #[test]
 fn the_creep_bound_admits_the_thesis_creep_and_refuses_a_lag_as_large_as_the_stage() {
     let base = ModelFile::built_in("thesis-linear").unwrap();
@@ -780,15 +781,25 @@ fn the_creep_bound_admits_the_thesis_creep_and_refuses_a_lag_as_large_as_the_sta
         m.drift = Some(d);
         m
     };
+    let long = protocol_data(&full, 150.0);
     for k in [1.0, 2.0] {
         let m = with_gains(k);
-        assert_eq!(gap::catalogue::implausible(&m, &base), None, "gains x{k}");
+        assert_eq!(
+            gap::catalogue::implausible(&m, &base, &long),
+            None,
+            "gains x{k}"
+        );
     }
-    let why = gap::catalogue::implausible(&with_gains(3.0), &base).expect("gains x3 refused");
+    let why = gap::catalogue::implausible(&with_gains(3.0), &base, &long).expect("x3 refused");
     assert!(why.contains("settled creep"), "{why}");
+    let short = [thesis_full_sine(5_000.0)];
+    assert_eq!(
+        gap::catalogue::implausible(&with_gains(3.0), &base, &short),
+        None
+    );
     // (a drift the base already holds, unchanged, is the user's, not a fit's)
     let absurd = with_gains(3.0);
-    assert_eq!(gap::catalogue::implausible(&absurd, &absurd), None);
+    assert_eq!(gap::catalogue::implausible(&absurd, &absurd, &long), None);
 }
 
 /// A step response, the record a lab makes first: the full thesis stage from rest at 0 V to

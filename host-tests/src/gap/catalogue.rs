@@ -19,7 +19,10 @@
 //! Every candidate is then checked the same way: the whole augmented model is simulated on
 //! every record by [`model_core::stage::Stage`] (never by a second simulator) and scored.
 
-use super::constants::{CREEP_SHARE_INPUTS_V, CREEP_SHARE_MAX, SENSOR_GAIN_RANGE};
+use super::constants::{
+    CREEP_SHARE_INPUTS_V, CREEP_SHARE_MAX, CREEP_START_UNPINNED_SHARE, SENSOR_GAIN_RANGE,
+};
+use super::data::Data;
 use crate::io::model_file::{
     DelaySection, DriftSection, GainSection, ModelFile, OffsetSection, PoleSection,
     ResonanceSection, SaturationSection, SensorGainSection, SlewSection,
@@ -68,10 +71,13 @@ pub const DRIFT_TAU_GRID_S: [f64; 14] = [
 /// does: a `sensor-gain` new in `m` (or changed from `base`'s) outside [`SENSOR_GAIN_RANGE`],
 /// or a `drift` new in `m` (or changed) whose settled creep adds more than
 /// [`CREEP_SHARE_MAX`] of the stage's linear reading (the plant's static gain through the
-/// sensor) at one of [`CREEP_SHARE_INPUTS_V`].
-/// Such a candidate is not admitted, whatever it explains.
-pub fn implausible(m: &ModelFile, base: &ModelFile) -> Option<String> {
-    implausible_scale(m, base).or_else(|| implausible_creep(m, base))
+/// sensor) at one of [`CREEP_SHARE_INPUTS_V`], counting the lags that settle within the
+/// longest of the records `data` (time constants up to [`CREEP_START_UNPINNED_SHARE`] of its
+/// length: a longer lag is a ramp there, its settled value the fit's extrapolation, and an
+/// offset beside it takes the creep it has not reached back, as step 18's creep from the
+/// first input does). Such a candidate is not admitted, whatever it explains.
+pub fn implausible(m: &ModelFile, base: &ModelFile, data: &[Data]) -> Option<String> {
+    implausible_scale(m, base).or_else(|| implausible_creep(m, base, data))
 }
 
 fn implausible_scale(m: &ModelFile, base: &ModelFile) -> Option<String> {
@@ -86,10 +92,22 @@ fn implausible_scale(m: &ModelFile, base: &ModelFile) -> Option<String> {
     })
 }
 
-fn implausible_creep(m: &ModelFile, base: &ModelFile) -> Option<String> {
+fn implausible_creep(m: &ModelFile, base: &ModelFile, data: &[Data]) -> Option<String> {
     let d = m.drift.as_ref()?;
     if base.drift.as_ref() == Some(d) {
         return None;
+    }
+    let longest_s = data
+        .iter()
+        .filter_map(|r| Some(r.t_s.last()? - r.t_s.first()?))
+        .fold(0.0f64, f64::max);
+    let mut settled = m.clone();
+    if let Some(dr) = settled.drift.as_mut() {
+        for (g, tau) in dr.gains.iter_mut().zip(dr.taus_s) {
+            if tau > CREEP_START_UNPINNED_SHARE * longest_s {
+                *g = 0.0;
+            }
+        }
     }
     // (the stage's linear reading: a table's `static_output` is a branch of its loop from
     // the table's bottom, not the reversible map, and a wide loop's reads a fraction of it)
@@ -99,7 +117,7 @@ fn implausible_creep(m: &ModelFile, base: &ModelFile) -> Option<String> {
     linear.hysteresis_play = None;
     linear.nonlinear_gain = None;
     CREEP_SHARE_INPUTS_V.iter().find_map(|&u| {
-        let creep_v = m.settled_creep_reading_v(u).ok()?;
+        let creep_v = settled.settled_creep_reading_v(u).ok()?;
         let reading_v = linear.static_reading_v(u).ok()?;
         let share = creep_v.abs() / reading_v.abs().max(f64::MIN_POSITIVE);
         (share > CREEP_SHARE_MAX).then(|| {

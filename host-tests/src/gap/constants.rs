@@ -463,8 +463,8 @@ pub const HOLD_BAND_SIGMAS: f64 = 10.0;
 pub const SENSOR_GAIN_RANGE: (f64, f64) = (0.8, 1.25);
 
 /// The largest share of the stage's linear reading (the plant's static gain through the
-/// sensor) that a `drift`'s settled creep may add at any of [`CREEP_SHARE_INPUTS_V`] (our
-/// assumption: the thesis' creep, `G_drift(0) K(u)` against the plant's static gain 0.79
+/// sensor) that the settled creep of a `drift`'s lags the records settle
+/// (`catalogue::implausible`) may add at any of [`CREEP_SHARE_INPUTS_V`] (our assumption: the thesis' creep, `G_drift(0) K(u)` against the plant's static gain 0.79
 /// (sec. 5.2), adds at most 22 % over its 0-6 V range, and PI quotes about 1 % per decade of
 /// time for its stages; a creep more than twice the thesis' is a lag standing in for a form
 /// the model lacks). Families case 3187, a Preisach loop whose branches run backwards after

@@ -2129,7 +2129,7 @@ fn diagnose_split(
                     let ok = score < 0.0
                         && explained >= MIN_EXPLAINED
                         && harmless
-                        && catalogue::implausible(&c.model, &model).is_none();
+                        && catalogue::implausible(&c.model, &model, data).is_none();
                     Some((c, score, explained, ok))
                 })
                 .collect()
@@ -2152,7 +2152,7 @@ fn diagnose_split(
             let sig_ok = c.effect.split('+').all(|e| sigs.supports(e, &c.model));
             // (a value no stage or sensor could have is a misfit of another form, whatever it
             // explains: said in the trace)
-            let implausible = catalogue::implausible(&c.model, &model);
+            let implausible = catalogue::implausible(&c.model, &model, data);
             let admissible =
                 score < 0.0 && explained >= MIN_EXPLAINED && harmless && implausible.is_none();
             if let Some(why) = implausible
@@ -2602,7 +2602,7 @@ fn diagnose_split(
                                 && explained >= MIN_EXPLAINED
                                 && harmless
                                 && sigs.supports("drift", &c.model)
-                                && catalogue::implausible(&c.model, &model).is_none();
+                                && catalogue::implausible(&c.model, &model, data).is_none();
                             Some((c, score, explained, ok))
                         })
                         .collect();
@@ -3377,7 +3377,7 @@ fn diagnose_split(
         let shown = |f: &str, m: &ModelFile| {
             cur_sigs.supports(f, m)
                 && (f != "offset" || cur_sigs.shows_offset(m))
-                && catalogue::implausible(m, &model).is_none()
+                && catalogue::implausible(m, &model, data).is_none()
         };
         // (step 17: beside a table, a static shape swapped in must be one the records tell
         // from the loop, as the final check asks)
