@@ -464,10 +464,11 @@ pub const SENSOR_GAIN_RANGE: (f64, f64) = (0.8, 1.25);
 
 /// The largest share of the stage's linear reading (the plant's static gain through the
 /// sensor) that the settled creep of a `drift`'s lags the records settle
-/// (`catalogue::implausible`) may add at any of [`CREEP_SHARE_INPUTS_V`] (our assumption: the thesis' creep, `G_drift(0) K(u)` against the plant's static gain 0.79
-/// (sec. 5.2), adds at most 22 % over its 0-6 V range, and PI quotes about 1 % per decade of
-/// time for its stages; a creep more than twice the thesis' is a lag standing in for a form
-/// the model lacks). Families case 3187, a Preisach loop whose branches run backwards after
+/// (`catalogue::implausible`) may add at any of [`CREEP_SHARE_INPUTS_V`] (our assumption:
+/// the thesis' creep, `G_drift(0) K(u)` against the plant's static gain 0.79 (sec. 5.2),
+/// adds at most 22 % over its 0-6 V range, and PI quotes about 1 % per decade of time for its
+/// stages; a creep more than twice the thesis' is a lag standing in for a form the model
+/// lacks). Families case 3187, a Preisach loop whose branches run backwards after
 /// each reversal on one long sine, named a `drift` whose 1.2 s lag, longer than the sine's
 /// 0.8 s period, settled at 87 % of the stage's linear reading at 2.5 V: a phase lag drawing
 /// the loop's misfit, at 28x the floor. The fitted drifts of the families' true creeps (log,
