@@ -97,10 +97,7 @@ fn implausible_creep(m: &ModelFile, base: &ModelFile, data: &[Data]) -> Option<S
     if base.drift.as_ref() == Some(d) {
         return None;
     }
-    let longest_s = data
-        .iter()
-        .filter_map(|r| Some(r.t_s.last()? - r.t_s.first()?))
-        .fold(0.0f64, f64::max);
+    let longest_s = super::data::longest_record_s(data);
     let mut settled = m.clone();
     if let Some(dr) = settled.drift.as_mut() {
         for (g, tau) in dr.gains.iter_mut().zip(dr.taus_s) {

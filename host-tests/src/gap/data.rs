@@ -342,6 +342,13 @@ impl Data {
     }
 }
 
+/// The longest record's length, seconds (first to last sample; 0 without records).
+pub fn longest_record_s(data: &[Data]) -> f64 {
+    data.iter()
+        .filter_map(|d| Some(d.t_s.last()? - d.t_s.first()?))
+        .fold(0.0f64, f64::max)
+}
+
 /// Smallest and largest value.
 pub fn min_max(v: &[f64]) -> (f64, f64) {
     v.iter()

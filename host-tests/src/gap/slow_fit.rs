@@ -1496,11 +1496,7 @@ fn fit_slow_linear(
         // Time constants beyond DRIFT_TAU_MAX_RECORDS record lengths are not drift the records
         // can show: such a lag barely moves within them and acts as a constant (an offset) or
         // a ramp.
-        let longest_s = data
-            .iter()
-            .map(|d| d.t_s[d.len() - 1] - d.t_s[0])
-            .fold(0.0f64, f64::max);
-        let tau_max = DRIFT_TAU_MAX_RECORDS * longest_s;
+        let tau_max = DRIFT_TAU_MAX_RECORDS * super::data::longest_record_s(data);
         let n_tau = catalogue::DRIFT_TAU_GRID_S
             .iter()
             .filter(|t| **t <= tau_max)
