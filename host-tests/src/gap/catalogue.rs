@@ -97,15 +97,7 @@ fn implausible_creep(m: &ModelFile, base: &ModelFile, data: &[Data]) -> Option<S
     if base.drift.as_ref() == Some(d) {
         return None;
     }
-    let longest_s = super::data::longest_record_s(data);
-    let mut settled = m.clone();
-    if let Some(dr) = settled.drift.as_mut() {
-        for (g, tau) in dr.gains.iter_mut().zip(dr.taus_s) {
-            if tau > CREEP_START_UNPINNED_SHARE * longest_s {
-                *g = 0.0;
-            }
-        }
-    }
+    let settled = pinned_lags(m, super::data::longest_record_s(data));
     // (the stage's linear reading: a table's `static_output` is a branch of its loop from
     // the table's bottom, not the reversible map, and a wide loop's reads a fraction of it)
     let mut linear = m.clone();
@@ -128,6 +120,21 @@ fn implausible_creep(m: &ModelFile, base: &ModelFile, data: &[Data]) -> Option<S
             )
         })
     })
+}
+
+/// `m` with only the drift lags a record of `seconds` pins (time constants up to
+/// [`CREEP_START_UNPINNED_SHARE`] of it; the others' gains set to zero): the creep such a
+/// record shows settled, where a longer lag is a ramp.
+pub fn pinned_lags(m: &ModelFile, seconds: f64) -> ModelFile {
+    let mut pinned = m.clone();
+    if let Some(dr) = pinned.drift.as_mut() {
+        for (g, tau) in dr.gains.iter_mut().zip(dr.taus_s) {
+            if tau > CREEP_START_UNPINNED_SHARE * seconds {
+                *g = 0.0;
+            }
+        }
+    }
+    pinned
 }
 
 /// Is `effect` present in `m`?

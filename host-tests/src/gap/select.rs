@@ -12,13 +12,13 @@
 use super::catalogue::{self, EFFECTS, FAST, SLOW};
 use super::constants::{
     CANDIDATE_ROUNDS, CANNOT_TELL_RATIO, CLIP_BAND_FLOORS, CLIP_MIN_SAMPLES, CLIP_MIN_SHARE,
-    CLIP_SPAN_SHARE, CREEP_START_MIN_FLOORS, CREEP_START_SHARE, CREEP_START_UNPINNED_SHARE,
-    DRIFT_TAIL_KEEP_NOISE, DRIFT_TAIL_MIN_NOISE, FOLLOW_MIN_CORRELATION, HELD_LOOP_OVER_TAIL,
-    HOLD_MIN_S, HYST_LOOP_MIN_NOISE, MAX_STEPS, MIN_EXPLAINED, MSE_MIN_V2, OCCAM_SWAP_RATIO,
-    PAIR_FLOOR_RATIO, PRUNE_KEEP_EXCESS_VAR, PRUNE_PER_PARAM, PRUNE_RATIO, REFIT_ALL_SHARE,
-    REST_ZERO_INPUT_V, REST_ZERO_SHOWN_MIN, REST_ZERO_SIGMAS, REVERSED_CORRELATION,
-    REVERSED_MIN_FLOORS, RISE_CHOICE_RATIO, SAME_READING_FLOORS, SCALE_APART_MAX,
-    SENSOR_GAIN_RANGE, STATIC_TELL_RATIO, STOP_FLOOR_RATIO, STRUCTURE_ROUNDS,
+    CLIP_SPAN_SHARE, CREEP_START_MIN_FLOORS, CREEP_START_SHARE, DRIFT_TAIL_KEEP_NOISE,
+    DRIFT_TAIL_MIN_NOISE, FOLLOW_MIN_CORRELATION, HELD_LOOP_OVER_TAIL, HOLD_MIN_S,
+    HYST_LOOP_MIN_NOISE, MAX_STEPS, MIN_EXPLAINED, MSE_MIN_V2, OCCAM_SWAP_RATIO, PAIR_FLOOR_RATIO,
+    PRUNE_KEEP_EXCESS_VAR, PRUNE_PER_PARAM, PRUNE_RATIO, REFIT_ALL_SHARE, REST_ZERO_INPUT_V,
+    REST_ZERO_SHOWN_MIN, REST_ZERO_SIGMAS, REVERSED_CORRELATION, REVERSED_MIN_FLOORS,
+    RISE_CHOICE_RATIO, SAME_READING_FLOORS, SCALE_APART_MAX, SENSOR_GAIN_RANGE, STATIC_TELL_RATIO,
+    STOP_FLOOR_RATIO, STRUCTURE_ROUNDS,
 };
 use super::cycle_noise::cycle_bar_v;
 use super::data::{
@@ -446,8 +446,9 @@ struct CreepStart {
 /// sample, which an offset takes up. Records that start at different inputs have different
 /// settled creeps, and one offset cannot take back all of them.
 ///
-/// A lag slower than a third of a record ([`CREEP_START_UNPINNED_SHARE`]) barely moves
-/// within it: whether it started settled or counting from the first input, the record sees
+/// A lag slower than a third of a record
+/// ([`CREEP_START_UNPINNED_SHARE`](super::constants::CREEP_START_UNPINNED_SHARE), the lags
+/// `catalogue::pinned_lags` keeps) barely moves within it: whether it started settled or counting from the first input, the record sees
 /// a constant and a slow trend that the offset and the other lags share, so its part of the
 /// settled creep may or may not be in the offset. The offset is then compared with the span
 /// from the settled creep of the lags the record pins to that of all of them (a power-law
@@ -475,14 +476,7 @@ fn creep_start(
         // The settled creep of the lags the record pins (their time constants within
         // CREEP_START_UNPINNED_SHARE of its length).
         let seconds = d.t_s.last()? - d.t_s.first()?;
-        let mut pinned = model.clone();
-        if let Some(dr) = pinned.drift.as_mut() {
-            for (g, tau) in dr.gains.iter_mut().zip(dr.taus_s) {
-                if tau > CREEP_START_UNPINNED_SHARE * seconds {
-                    *g = 0.0;
-                }
-            }
-        }
+        let pinned = catalogue::pinned_lags(model, seconds);
         // (where the pinned lags leave no creep of the same sign clear of the noise, as a
         // record shorter than three of every lag's time constants, the span would reach zero
         // and take any small offset of the right sign: the one value of all the lags, then)
