@@ -2059,6 +2059,106 @@ fn diagnosed_sorted(seed: u64) -> (gap::Diagnosis, Vec<String>) {
     (d, named)
 }
 
+/// A creep beside a scale error, on records whose creep counts from their first input (the
+/// swaps' fit with the drift's start, session 66, GAP.md step 18). Written on the families'
+/// random levels (10287, 11308: a log or power creep and a 3.8 % or 1.6 % scale read as a
+/// drift and an offset, 14.5x and 4.2x the floor, because the drift refitted beside the scale
+/// with no start to take back fitted only its fastest lags); tested here on another protocol
+/// the rule was not written on: a staircase of 6-12 levels up and down, each held 0.15-1 s,
+/// from a level of 2-8 V (no rest at 0 V), 2-20 kHz, the families' creeps and a scale of
+/// 1-5 % either way. No offset may be named (none is in the truth: an offset beside the
+/// creep stands in for the scale), the creep is named in every case, no record is left above
+/// 1.5x its floor unsaid, and the scale is named in 10 of the 12 cases or more. Measured on
+/// seeds 13000-13011: before the rule the scale was named in 9 (13007: `drift` and a false
+/// `offset` at 2.20x the floor), with it in 10 (13007: 1.01x). Both before and after, 13001
+/// and 13002 name a `hysteresis` (13001 a curvature too) beside the creep in the scale's place:
+/// the joint `drift+hysteresis` step, where on holds of 0.15-1 s, shorter than the creep's
+/// slowest lag, the levels reached from below and from above differ by the creep's unfinished
+/// tails, which a loop holds as well, and a table takes a scale. That confound is reported in
+/// GAP.md (session 66) and is not this test's subject: it asserts no false name but the
+/// offset.
+#[test]
+fn a_creep_beside_a_scale_names_no_offset_in_its_place() {
+    let base = ModelFile::built_in("thesis-linear").unwrap();
+    let mut lines = Vec::new();
+    let mut failed = Vec::new();
+    let mut scales = 0;
+    let seeds: Vec<u64> = std::env::var("GAP_SEED").map_or((13000..13012).collect(), |s| {
+        s.split(',').filter_map(|x| x.trim().parse().ok()).collect()
+    });
+    for seed in seeds {
+        let mut rng = StdRng::seed_from_u64(seed);
+        let rate: f64 = lu(&mut rng, 2000.0, 20000.0).round();
+        let n_levels: usize = rng.gen_range(6..=12);
+        let mut level: f64 = rng.gen_range(2.0..8.0);
+        let mut up = rng.gen_bool(0.5);
+        let (mut t_s, mut u_v) = (Vec::new(), Vec::new());
+        for _ in 0..n_levels {
+            let hold_s: f64 = rng.gen_range(0.15..1.0);
+            let n0 = t_s.len();
+            for i in 0..(hold_s * rate) as usize {
+                t_s.push((n0 + i) as f64 / rate);
+                u_v.push(level);
+            }
+            let step: f64 = rng.gen_range(0.5..2.5);
+            if (up && level + step > 9.5) || (!up && level - step < 0.5) {
+                up = !up;
+            }
+            level += if up { step } else { -step };
+        }
+        let seconds = t_s.len() as f64 / rate;
+        let protocol = Protocol::one_record(
+            Family::RandomLevels,
+            "staircase.csv",
+            (t_s, u_v),
+            format!("a staircase of {n_levels} levels, {rate:.0} Hz {seconds:.1} s"),
+            (Some(rate), true),
+        );
+        let effects = vec!["drift", "sensor-gain"];
+        let mut case = Case::of(seed, protocol, effects.clone());
+        case.creep = Some(Creep::draw(&mut rng));
+        let sign = if rng.gen_bool(0.5) { 1.0 } else { -1.0 };
+        case.sensor_gain = Some(1.0 + sign * rng.gen_range(0.01..0.05));
+        let d = diagnose(&base, &case.records(), &Options::default()).expect("diagnosis");
+        let offsets = d.named.iter().filter(|n| n.as_str() == "offset").count();
+        let pairs: Vec<String> = d
+            .cannot_tell
+            .iter()
+            .map(|c| format!("{} / {}", c.named, c.alternative))
+            .collect();
+        let line = format!(
+            "{seed} {} gain {:.4} {}: named {:?}, {:.2}x; cannot tell {pairs:?}",
+            case.creep.as_ref().map_or("", Creep::label),
+            case.sensor_gain.unwrap_or(1.0),
+            case.protocol.desc,
+            d.named,
+            d.final_rms_v / d.noise_floor_v
+        );
+        if std::env::var("GAP_DEBUG").is_ok() {
+            println!("{}\n{}", d.table(), d.trace());
+        }
+        scales += usize::from(d.named.iter().any(|n| n == "sensor-gain"));
+        let silent = d.final_rms_v > 1.5 * d.noise_floor_v && d.cannot_tell.is_empty();
+        if offsets > 0 || !d.named.iter().any(|n| n == "drift") || silent {
+            failed.push(line.clone());
+        }
+        lines.push(line);
+    }
+    println!(
+        "{}\nscale named in {scales} of {}",
+        lines.join("\n"),
+        lines.len()
+    );
+    assert!(failed.is_empty(), "{}", failed.join("\n"));
+    if std::env::var("GAP_SEED").is_err() {
+        assert!(
+            scales >= 10,
+            "scale named in {scales} of 12\n{}",
+            lines.join("\n")
+        );
+    }
+}
+
 /// The step response rule's evidence away from the record it came from (session 64: the drift
 /// fitted beside each look-alike static shape as one step, written on the `thesis-full`
 /// stage's step responses, `gap.rs`): the families' creeps (log and power, their own gains

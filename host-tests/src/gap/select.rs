@@ -1063,6 +1063,48 @@ fn creep_from_first_input(
     Some(joint_candidate(&CREEP_FROM_FIRST, fitted))
 }
 
+/// A swap's trial (`e` out, `f` in, of the named slow effects `named_slow`) fitted with the
+/// drift's start (step 18 for a swap; the caller asks it where `e` is a named offset that is
+/// not the drift's start by step 12's test): where the drift stays and no offset would be
+/// named, the trial's set is fitted with an offset as well, and where that offset is the
+/// settled creep at the records' first input taken back (step 12's test, [`creep_start`]) it
+/// moves into `[drift] unsettled_v`. `m0` is the model with `e` reverted. `None` where it does
+/// not apply or the offset is not the drift's start.
+fn creep_counted_from_first(
+    m0: &ModelFile,
+    f: &str,
+    (e, named_slow): (&str, &[String]),
+    data: &[Data],
+    (slow_x, u_range): (&SlowRegressors, (f64, f64)),
+    noise: &[f64],
+) -> Option<Fitted> {
+    let set: Vec<String> = named_slow
+        .iter()
+        .map(|n| if n == e { f.to_string() } else { n.clone() })
+        .collect();
+    if !set.iter().any(|n| n == "drift")
+        || set.iter().any(|n| n == "offset")
+        || data.iter().any(|d| d.zero_rest_len().is_some())
+    {
+        return None;
+    }
+    let m = refit_slow(m0, &[f, "offset"], data, slow_x, u_range)?;
+    let with: Vec<String> = set.iter().cloned().chain(["offset".to_string()]).collect();
+    let c = creep_start(&m, &with, data, noise)?;
+    let mut m = m;
+    m.drift.as_mut()?.unsettled_v = Some(c.offset_v);
+    m.offset = None;
+    let (s, ms) = simulate_all(&m, data).ok()?;
+    Some((m, s, ms))
+}
+
+/// Did the trial `m` take a drift's start that `model` does not have
+/// ([`creep_counted_from_first`])?
+fn started_here(model: &ModelFile, m: &ModelFile) -> bool {
+    let start = |m: &ModelFile| m.drift.as_ref().and_then(|d| d.unsettled_v);
+    start(m).is_some() && start(m) != start(model)
+}
+
 /// The drift and the offset its start takes back, fitted as one step.
 const CREEP_FROM_FIRST: [&str; 2] = ["drift", "offset"];
 
@@ -3311,7 +3353,9 @@ fn diagnose_split(
     // (an offset and a scale for a polynomial gain and an offset) is the one to name. Above
     // the floor, one static shape with fewer parameters (in the catalogue: an offset or a
     // scale for `nonlinear-gain`) that leaves within `OCCAM_SWAP_RATIO` in every record is
-    // swapped in whatever the score (below).
+    // swapped in whatever the score (below). A named offset that is not the drift's start
+    // (step 12's test) is also swapped with the drift's start fitted beside the new set
+    // (`creep_counted_from_first`, GAP.md step 18).
     {
         let score = |ms: &[f64], set: &[String]| set_score(data, ms, set);
         let named_slow: Vec<String> = named
@@ -3331,6 +3375,9 @@ fn diagnose_split(
                 swaps.push((e.clone(), f.to_string()));
             }
         }
+        // (an offset step 12 will read as the drift's start already is one: a swap of it
+        // with the start would be a shape added, which the steps' gate is for)
+        let offset_is_start = creep_start(&model, &named, data, &noise).is_some();
         let trials = par_map_costliest_first(
             &swaps,
             |(e, f)| {
@@ -3341,10 +3388,26 @@ fn diagnose_split(
                 slow_cost(&set)
             },
             |(e, f)| -> Option<Fitted> {
-                let m = catalogue::revert(&model, base, e);
-                let m = refit_slow(&m, &[f.as_str()], data, &slow_x, u_range)?;
+                let m0 = catalogue::revert(&model, base, e);
+                let m = refit_slow(&m0, &[f.as_str()], data, &slow_x, u_range)?;
                 let (s, ms) = simulate_all(&m, data).ok()?;
-                Some((m, s, ms))
+                // (and with the drift's start, where that leaves less: step 18 for a swap)
+                let started = (e == "offset" && !offset_is_start)
+                    .then(|| {
+                        creep_counted_from_first(
+                            &m0,
+                            f,
+                            (e, &named_slow),
+                            data,
+                            (&slow_x, u_range),
+                            &noise,
+                        )
+                    })
+                    .flatten();
+                Some(match started {
+                    Some(t) if in_noise_vars(&t.2, &var) < in_noise_vars(&ms, &var) => t,
+                    _ => (m, s, ms),
+                })
             },
         );
         let cur_score = score(&cur_mse, &named);
@@ -3447,7 +3510,14 @@ fn diagnose_split(
                     .iter()
                     .map(|n| if n == e { f.clone() } else { n.clone() })
                     .collect();
-                let sc = score(&ms, &set);
+                // (the drift's start, where the trial took it, is a constant the score counts
+                // as an offset's)
+                let sc = if started_here(&model, &m) {
+                    let with: Vec<String> = set.iter().cloned().chain(["offset".into()]).collect();
+                    score(&ms, &with)
+                } else {
+                    score(&ms, &set)
+                };
                 // No record may get worse: the score is dominated by the longest record, and
                 // a swap that trades a short fast record for it (an offset for the non-linear
                 // gain of the full thesis stage) is no explanation.
@@ -3506,16 +3576,41 @@ fn diagnose_split(
                     ),
                 });
             }
+            // (a trial that took the drift's start says so, as step 12 does)
+            let start_said = match m.drift.as_ref().and_then(|d| d.unsettled_v) {
+                Some(start_v) if started_here(&model, &m) => {
+                    let why = format!(
+                        "the drift refitted beside {f} counts its creep from the records' first \
+                         input: its start, {:.1} mV, is the settled creep there taken back \
+                         (step 12's test), kept as [drift] unsettled_v; a rest at 0 V before \
+                         the records, or records that start at other inputs, tell it from a \
+                         sensor offset",
+                        1e3 * start_v
+                    );
+                    ambiguous.push(CannotTell {
+                        named: "drift".into(),
+                        alternative: "offset".into(),
+                        neither_named: false,
+                        taken_out: TakenOut::No,
+                        rms_v: rms_of(&ms),
+                        alternative_rms_v: rms_of(&ms),
+                        why: why.clone(),
+                    });
+                    format!("; {why}")
+                }
+                _ => String::new(),
+            };
             let evidence = if better {
                 format!(
-                    "swapped in for {e}, which these records cannot tell from it (score {:.0} lower)",
+                    "swapped in for {e}, which these records cannot tell from it (score {:.0} \
+                     lower){start_said}",
                     cur_score - sc
                 )
             } else {
                 format!(
                     "swapped in for {e}, which these records cannot tell from it: {} parameter(s) \
                      against {}, within {OCCAM_SWAP_RATIO}x in every record ({:.2} mV against \
-                     {:.2} mV), and no other shape with fewer parameters as close",
+                     {:.2} mV), and no other shape with fewer parameters as close{start_said}",
                     catalogue::param_count(&f),
                     catalogue::param_count(&e),
                     1e3 * rms_of(&ms),
