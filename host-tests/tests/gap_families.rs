@@ -2059,31 +2059,68 @@ fn diagnosed_sorted(seed: u64) -> (gap::Diagnosis, Vec<String>) {
     (d, named)
 }
 
-/// A creep beside a scale error, on records whose creep counts from their first input (the
-/// swaps' fit with the drift's start, session 66, GAP.md step 18). Written on the families'
-/// random levels (10287, 11308: a log or power creep and a 3.8 % or 1.6 % scale read as a
-/// drift and an offset, 14.5x and 4.2x the floor, because the drift refitted beside the scale
-/// with no start to take back fitted only its fastest lags); tested here on another protocol
-/// the rule was not written on: a staircase of 6-12 levels up and down, each held 0.15-1 s,
-/// from a level of 2-8 V (no rest at 0 V), 2-20 kHz, the families' creeps and a scale of
-/// 1-5 % either way. No offset may be named (none is in the truth: an offset beside the
-/// creep stands in for the scale), the creep is named in every case, no record is left above
-/// 1.5x its floor unsaid, and the scale is named in 10 of the 12 cases or more. Measured on
-/// seeds 13000-13011: before the rule the scale was named in 9 (13007: `drift` and a false
-/// `offset` at 2.20x the floor), with it in 10 (13007: 1.01x). Both before and after, 13001
-/// and 13002 name a `hysteresis` (13001 a curvature too) beside the creep in the scale's place:
-/// the joint `drift+hysteresis` step, where on holds of 0.15-1 s, shorter than the creep's
-/// slowest lag, the levels reached from below and from above differ by the creep's unfinished
-/// tails, which a loop holds as well, and a table takes a scale. That confound is reported in
-/// GAP.md (session 66) and is not this test's subject: it asserts no false name but the
-/// offset.
+/// A creep beside a scale error on a staircase of levels (session 66: the creep that counts
+/// from the first input fitted with a scale, GAP.md step 18, and the swaps' fit of the
+/// drift's start). Both rules were written on the families' random levels (3158, 3457: a log
+/// creep and a 1.1 % or 3.4 % scale, nothing named at 43x and the scale missed at 7.5x; 10287,
+/// 11308: a drift and a false offset at 14.5x and 4.2x); the staircase
+/// ([`staircase_diagnosed`]) is a protocol neither was shaped on. No name may be false, the
+/// creep is named in every case, no record is left above 1.5x its floor unsaid, and the scale
+/// is named in 11 of the 12 cases or more. Measured on seeds 13000-13011: before both rules
+/// the scale was named in 9, with four false names (13001: a loop and a curvature, 13002: a
+/// loop, in the scale's place, the joint `drift+hysteresis` step; 13007: an offset at
+/// 2.20x); with the swaps' rule alone in 10 (13007 exact at 1.01x); with both in 12, no false
+/// name.
 #[test]
-fn a_creep_beside_a_scale_names_no_offset_in_its_place() {
+fn a_creep_beside_a_scale_on_a_staircase_names_both() {
+    let (lines, failed, named) = staircase_diagnosed(13000..13012, |_| "sensor-gain");
+    let scales = named
+        .iter()
+        .filter(|n| n.iter().any(|e| e == "sensor-gain"))
+        .count();
+    println!(
+        "{}\nscale named in {scales} of {}",
+        lines.join("\n"),
+        lines.len()
+    );
+    assert!(failed.is_empty(), "{}", failed.join("\n"));
+    assert!(
+        scales + 1 >= lines.len(),
+        "scale named in {scales}\n{}",
+        lines.join("\n")
+    );
+}
+
+/// The creep on the same staircase alone or beside an offset or a curvature (no scale): the
+/// two rules of session 66 offer a scale beside the creep, and must not name one the
+/// records do not hold. No name may be false, the creep is named in every case, and no record
+/// is left above 1.5x its floor unsaid. Measured on seeds 13100-13117 (six of each truth):
+/// see GAP.md, session 66, for the counts before and after.
+#[test]
+fn a_creep_on_a_staircase_names_no_false_scale() {
+    let (lines, failed, _) = staircase_diagnosed(13100..13118, |seed| {
+        ["", "offset", "nonlinear-gain"][(seed % 3) as usize]
+    });
+    println!("{}", lines.join("\n"));
+    assert!(failed.is_empty(), "{}", failed.join("\n"));
+}
+
+/// Diagnoses, one per seed of `seeds` (or of `GAP_SEED=a,b,...`), of a creep (the families')
+/// beside the static shape `shape(seed)` (`""`: none; a scale of 1-5 %, an offset of 5-30 mV
+/// either way, or a curvature) on one record: a staircase of 6-12 levels up and down, each
+/// held 0.15-1 s, from a level of 2-8 V (no rest at 0 V), 2-20 kHz. Returns a line per case
+/// and the lines of the cases that fail (a false name, the creep missed, or a record left
+/// above 1.5x its floor with no pair said), and each case's named set. `GAP_DEBUG=1` prints
+/// each table and trace.
+fn staircase_diagnosed(
+    seeds: std::ops::Range<u64>,
+    shape: impl Fn(u64) -> &'static str,
+) -> (Vec<String>, Vec<String>, Vec<Vec<String>>) {
     let base = ModelFile::built_in("thesis-linear").unwrap();
     let mut lines = Vec::new();
     let mut failed = Vec::new();
-    let mut scales = 0;
-    let seeds: Vec<u64> = std::env::var("GAP_SEED").map_or((13000..13012).collect(), |s| {
+    let mut named = Vec::new();
+    let seeds: Vec<u64> = std::env::var("GAP_SEED").map_or(seeds.collect(), |s| {
         s.split(',').filter_map(|x| x.trim().parse().ok()).collect()
     });
     for seed in seeds {
@@ -2114,49 +2151,49 @@ fn a_creep_beside_a_scale_names_no_offset_in_its_place() {
             format!("a staircase of {n_levels} levels, {rate:.0} Hz {seconds:.1} s"),
             (Some(rate), true),
         );
-        let effects = vec!["drift", "sensor-gain"];
+        let shape = shape(seed);
+        let mut effects = vec!["drift"];
+        if !shape.is_empty() {
+            effects.push(shape);
+        }
         let mut case = Case::of(seed, protocol, effects.clone());
         case.creep = Some(Creep::draw(&mut rng));
         let sign = if rng.gen_bool(0.5) { 1.0 } else { -1.0 };
-        case.sensor_gain = Some(1.0 + sign * rng.gen_range(0.01..0.05));
+        match shape {
+            "sensor-gain" => case.sensor_gain = Some(1.0 + sign * rng.gen_range(0.01..0.05)),
+            "offset" => case.offset_v = Some(sign * rng.gen_range(0.005..0.03)),
+            "nonlinear-gain" => case.static_map = Some(StaticMap::draw(&mut rng)),
+            _ => {}
+        }
         let d = diagnose(&base, &case.records(), &Options::default()).expect("diagnosis");
-        let offsets = d.named.iter().filter(|n| n.as_str() == "offset").count();
+        if std::env::var("GAP_DEBUG").is_ok() {
+            println!("{}\n{}", d.table(), d.trace());
+        }
+        let false_names = d
+            .named
+            .iter()
+            .filter(|n| !effects.contains(&n.as_str()))
+            .count();
         let pairs: Vec<String> = d
             .cannot_tell
             .iter()
             .map(|c| format!("{} / {}", c.named, c.alternative))
             .collect();
         let line = format!(
-            "{seed} {} gain {:.4} {}: named {:?}, {:.2}x; cannot tell {pairs:?}",
+            "{seed} {} {shape:?} {}: named {:?}, {:.2}x; cannot tell {pairs:?}",
             case.creep.as_ref().map_or("", Creep::label),
-            case.sensor_gain.unwrap_or(1.0),
             case.protocol.desc,
             d.named,
             d.final_rms_v / d.noise_floor_v
         );
-        if std::env::var("GAP_DEBUG").is_ok() {
-            println!("{}\n{}", d.table(), d.trace());
-        }
-        scales += usize::from(d.named.iter().any(|n| n == "sensor-gain"));
         let silent = d.final_rms_v > 1.5 * d.noise_floor_v && d.cannot_tell.is_empty();
-        if offsets > 0 || !d.named.iter().any(|n| n == "drift") || silent {
+        if false_names > 0 || !d.named.iter().any(|n| n == "drift") || silent {
             failed.push(line.clone());
         }
         lines.push(line);
+        named.push(d.named);
     }
-    println!(
-        "{}\nscale named in {scales} of {}",
-        lines.join("\n"),
-        lines.len()
-    );
-    assert!(failed.is_empty(), "{}", failed.join("\n"));
-    if std::env::var("GAP_SEED").is_err() {
-        assert!(
-            scales >= 10,
-            "scale named in {scales} of 12\n{}",
-            lines.join("\n")
-        );
-    }
+    (lines, failed, named)
 }
 
 /// The step response rule's evidence away from the record it came from (session 64: the drift
