@@ -2107,11 +2107,9 @@ fn a_creep_on_a_staircase_names_no_false_scale() {
 
 /// Diagnoses, one per seed of `seeds` (or of `GAP_SEED=a,b,...`), of a creep (the families')
 /// beside the static shape `shape(seed)` (`""`: none; a scale of 1-5 %, an offset of 5-30 mV
-/// either way, or a curvature) on one record: a staircase of 6-12 levels up and down, each
-/// held 0.15-1 s, from a level of 2-8 V (no rest at 0 V), 2-20 kHz. Returns a line per case
-/// and the lines of the cases that fail (a false name, the creep missed, or a record left
-/// above 1.5x its floor with no pair said), and each case's named set. `GAP_DEBUG=1` prints
-/// each table and trace.
+/// either way, or a curvature: [`creep_case_diagnosed`]) on one record: a staircase of 6-12
+/// levels up and down, each held 0.15-1 s, from a level of 2-8 V (no rest at 0 V), 2-20 kHz.
+/// Returns a line per case, the lines of the cases that fail, and each case's named set.
 fn staircase_diagnosed(
     seeds: std::ops::Range<u64>,
     shape: impl Fn(u64) -> &'static str,
@@ -2151,49 +2149,68 @@ fn staircase_diagnosed(
             format!("a staircase of {n_levels} levels, {rate:.0} Hz {seconds:.1} s"),
             (Some(rate), true),
         );
-        let shape = shape(seed);
-        let mut effects = vec!["drift"];
-        if !shape.is_empty() {
-            effects.push(shape);
-        }
-        let mut case = Case::of(seed, protocol, effects.clone());
-        case.creep = Some(Creep::draw(&mut rng));
-        let sign = if rng.gen_bool(0.5) { 1.0 } else { -1.0 };
-        match shape {
-            "sensor-gain" => case.sensor_gain = Some(1.0 + sign * rng.gen_range(0.01..0.05)),
-            "offset" => case.offset_v = Some(sign * rng.gen_range(0.005..0.03)),
-            "nonlinear-gain" => case.static_map = Some(StaticMap::draw(&mut rng)),
-            _ => {}
-        }
-        let d = diagnose(&base, &case.records(), &Options::default()).expect("diagnosis");
-        if std::env::var("GAP_DEBUG").is_ok() {
-            println!("{}\n{}", d.table(), d.trace());
-        }
-        let false_names = d
-            .named
-            .iter()
-            .filter(|n| !effects.contains(&n.as_str()))
-            .count();
-        let pairs: Vec<String> = d
-            .cannot_tell
-            .iter()
-            .map(|c| format!("{} / {}", c.named, c.alternative))
-            .collect();
-        let line = format!(
-            "{seed} {} {shape:?} {}: named {:?}, {:.2}x; cannot tell {pairs:?}",
-            case.creep.as_ref().map_or("", Creep::label),
-            case.protocol.desc,
-            d.named,
-            d.final_rms_v / d.noise_floor_v
-        );
-        let silent = d.final_rms_v > 1.5 * d.noise_floor_v && d.cannot_tell.is_empty();
-        if false_names > 0 || !d.named.iter().any(|n| n == "drift") || silent {
+        let (line, ok, n) =
+            creep_case_diagnosed(&base, (seed, &mut rng), protocol, shape(seed), 0.01);
+        if !ok {
             failed.push(line.clone());
         }
         lines.push(line);
-        named.push(d.named);
+        named.push(n);
     }
     (lines, failed, named)
+}
+
+/// One record of `protocol` from a stage with one of the families' creeps (drawn from `rng`)
+/// beside the static shape `shape` (`""`: none; a scale of `scale_min`-5 % or an offset of
+/// 5-30 mV, either way, or one of the families' curvatures), diagnosed from `thesis-linear`.
+/// Returns a line for the case, whether it holds (no false name, the creep named, and no
+/// record above 1.5x its floor without a pair said: a missed shape is said), and the named
+/// set. `GAP_DEBUG=1` prints the table and the trace.
+fn creep_case_diagnosed(
+    base: &ModelFile,
+    (seed, rng): (u64, &mut StdRng),
+    protocol: Protocol,
+    shape: &'static str,
+    scale_min: f64,
+) -> (String, bool, Vec<String>) {
+    let mut effects = vec!["drift"];
+    if !shape.is_empty() {
+        effects.push(shape);
+    }
+    effects.sort();
+    let mut case = Case::of(seed, protocol, effects.clone());
+    case.creep = Some(Creep::draw(rng));
+    let sign = if rng.gen_bool(0.5) { 1.0 } else { -1.0 };
+    match shape {
+        "offset" => case.offset_v = Some(sign * rng.gen_range(0.005..0.03)),
+        "sensor-gain" => case.sensor_gain = Some(1.0 + sign * rng.gen_range(scale_min..0.05)),
+        "nonlinear-gain" => case.static_map = Some(StaticMap::draw(rng)),
+        _ => {}
+    }
+    let d = diagnose(base, &case.records(), &Options::default()).expect("diagnosis");
+    if std::env::var("GAP_DEBUG").is_ok() {
+        println!("{}\n{}", d.table(), d.trace());
+    }
+    let false_names = d
+        .named
+        .iter()
+        .filter(|n| !effects.contains(&n.as_str()))
+        .count();
+    let pairs: Vec<String> = d
+        .cannot_tell
+        .iter()
+        .map(|c| format!("{} / {}", c.named, c.alternative))
+        .collect();
+    let line = format!(
+        "{seed} {effects:?} {} {}: named {:?}, {:.2}x; cannot tell {pairs:?}",
+        case.creep.as_ref().map_or("", Creep::label),
+        case.protocol.desc,
+        d.named,
+        d.final_rms_v / d.noise_floor_v
+    );
+    let silent = d.final_rms_v > 1.5 * d.noise_floor_v && d.cannot_tell.is_empty();
+    let ok = false_names == 0 && d.named.iter().any(|n| n == "drift") && !silent;
+    (line, ok, d.named)
 }
 
 /// The step response rule's evidence away from the record it came from (session 64: the drift
@@ -2231,40 +2248,8 @@ fn a_step_response_of_other_creeps_names_nothing_false() {
         );
         // (the creep alone, or beside one static shape, in turn)
         let shape = ["", "offset", "sensor-gain", "nonlinear-gain"][(seed % 4) as usize];
-        let mut effects = vec!["drift"];
-        if !shape.is_empty() {
-            effects.push(shape);
-        }
-        effects.sort();
-        let mut case = Case::of(seed, protocol, effects.clone());
-        case.creep = Some(Creep::draw(&mut rng));
-        let sign = if rng.gen_bool(0.5) { 1.0 } else { -1.0 };
-        match shape {
-            "offset" => case.offset_v = Some(sign * rng.gen_range(0.005..0.03)),
-            "sensor-gain" => case.sensor_gain = Some(1.0 + sign * rng.gen_range(0.005..0.05)),
-            "nonlinear-gain" => case.static_map = Some(StaticMap::draw(&mut rng)),
-            _ => {}
-        }
-        let d = diagnose(&base, &case.records(), &Options::default()).expect("diagnosis");
-        let false_names: Vec<&String> = d
-            .named
-            .iter()
-            .filter(|n| !effects.contains(&n.as_str()))
-            .collect();
-        let pairs: Vec<String> = d
-            .cannot_tell
-            .iter()
-            .map(|c| format!("{} / {}", c.named, c.alternative))
-            .collect();
-        let line = format!(
-            "{seed} {effects:?} {}: named {:?}, {:.2}x; cannot tell {pairs:?}",
-            case.protocol.desc,
-            d.named,
-            d.final_rms_v / d.noise_floor_v
-        );
-        // (a missed shape leaves the record above 1.5x its floor only with a pair said)
-        let silent = d.final_rms_v > 1.5 * d.noise_floor_v && d.cannot_tell.is_empty();
-        if !false_names.is_empty() || !d.named.iter().any(|n| n == "drift") || silent {
+        let (line, ok, _) = creep_case_diagnosed(&base, (seed, &mut rng), protocol, shape, 0.005);
+        if !ok {
             failed.push(line.clone());
         }
         lines.push(line);
