@@ -1081,39 +1081,38 @@ fn creep_from_first_input(
 /// The drift, the offset its start takes back and a scale error, fitted as one step.
 const CREEP_SCALE_FROM_FIRST: [&str; 3] = ["drift", "offset", "sensor-gain"];
 
-/// A swap's trial (`e` out, `f` in, of the named slow effects `named_slow`) fitted with the
-/// drift's start (step 18 for a swap; the caller asks it where `e` is a named offset that is
-/// not the drift's start by step 12's test): where the drift stays and no offset would be
-/// named, the trial's set is fitted with an offset as well, and where that offset is the
-/// settled creep at the records' first input taken back (step 12's test, [`creep_start`]) it
-/// moves into `[drift] unsettled_v`. `m0` is the model with `e` reverted. `None` where it does
-/// not apply or the offset is not the drift's start.
+/// A swap's trial, `f` in the place of a named offset, fitted with the drift's start (step 18
+/// for a swap; the caller asks it where the offset is not the drift's start by step 12's
+/// test): where a drift is among the named slow effects `named_slow`, the slow effects of
+/// `m0` (the model with the offset reverted) and `f` are fitted with an offset as well, and
+/// where that offset is the settled creep at the records' first input taken back (step 12's
+/// test, [`creep_start`]) it moves into `[drift] unsettled_v`. `None` where a record starts at
+/// rest at 0 V (there the two starts agree), or where the offset is not the drift's start.
 fn creep_counted_from_first(
-    m0: &ModelFile,
-    f: &str,
-    (e, named_slow): (&str, &[String]),
+    (m0, f): (&ModelFile, &str),
+    named_slow: &[String],
     data: &[Data],
     (slow_x, u_range): (&SlowRegressors, (f64, f64)),
     noise: &[f64],
 ) -> Option<Fitted> {
-    let set: Vec<String> = named_slow
-        .iter()
-        .map(|n| if n == e { f.to_string() } else { n.clone() })
-        .collect();
-    if !set.iter().any(|n| n == "drift")
-        || set.iter().any(|n| n == "offset")
-        || data.iter().any(|d| d.zero_rest_len().is_some())
+    if !named_slow.iter().any(|n| n == "drift") || data.iter().any(|d| d.zero_rest_len().is_some())
     {
         return None;
     }
-    let m = refit_slow(m0, &[f, "offset"], data, slow_x, u_range)?;
-    let with: Vec<String> = set.iter().cloned().chain(["offset".to_string()]).collect();
-    let c = creep_start(&m, &with, data, noise)?;
-    let mut m = m;
-    m.drift.as_mut()?.unsettled_v = Some(c.offset_v);
-    m.offset = None;
+    let mut m = refit_slow(m0, &[f, "offset"], data, slow_x, u_range)?;
+    // (the drift and the offset, as step 12 asks them named)
+    let c = creep_start(&m, named_slow, data, noise)?;
+    offset_into_drift_start(&mut m, &c)?;
     let (s, ms) = simulate_all(&m, data).ok()?;
     Some((m, s, ms))
+}
+
+/// Move `m`'s offset, which step 12's test `c` read as the drift's start, into
+/// `[drift] unsettled_v` (the same readings); `None` without a drift.
+fn offset_into_drift_start(m: &mut ModelFile, c: &CreepStart) -> Option<()> {
+    m.drift.as_mut()?.unsettled_v = Some(c.offset_v);
+    m.offset = None;
+    Some(())
 }
 
 /// Did the trial `m` take a drift's start that `model` does not have
@@ -3421,9 +3420,8 @@ fn diagnose_split(
                 let started = (e == "offset" && !offset_is_start)
                     .then(|| {
                         creep_counted_from_first(
-                            &m0,
-                            f,
-                            (e, &named_slow),
+                            (&m0, f),
+                            &named_slow,
                             data,
                             (&slow_x, u_range),
                             &noise,
@@ -4060,10 +4058,8 @@ fn diagnose_split(
     // pairs are settled on the named set with the offset (the drift's rival refitted beside
     // it, and a pair the offset's naming told apart stays dropped).
     if let Some(c) = creep_start(&model, &named, data, &noise)
-        && let Some(drift) = model.drift.as_mut()
+        && offset_into_drift_start(&mut model, &c).is_some()
     {
-        drift.unsettled_v = Some(c.offset_v);
-        model.offset = None;
         named.retain(|n| n != "offset");
         // (the lags slower than a third of the record leave a span: say it)
         let (of, within) = if (c.pinned_v - c.creep_v).abs() > 1e-9 {
