@@ -233,6 +233,11 @@ impl Data {
         c
     }
 
+    /// The record's length, seconds (first to last sample; `None` without samples).
+    pub fn length_s(&self) -> Option<f64> {
+        Some(self.t_s.last()? - self.t_s.first()?)
+    }
+
     /// Sampling period, seconds.
     pub fn period_s(&self) -> f64 {
         let n = self.t_s.len();
@@ -342,10 +347,10 @@ impl Data {
     }
 }
 
-/// The longest record's length, seconds (first to last sample; 0 without records).
+/// The longest record's length, seconds ([`Data::length_s`]; 0 without records).
 pub fn longest_record_s(data: &[Data]) -> f64 {
     data.iter()
-        .filter_map(|d| Some(d.t_s.last()? - d.t_s.first()?))
+        .filter_map(Data::length_s)
         .fold(0.0f64, f64::max)
 }
 

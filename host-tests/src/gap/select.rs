@@ -447,8 +447,9 @@ struct CreepStart {
 /// settled creeps, and one offset cannot take back all of them.
 ///
 /// A lag slower than a third of a record
-/// ([`CREEP_START_UNPINNED_SHARE`](super::constants::CREEP_START_UNPINNED_SHARE), the lags
-/// `catalogue::pinned_lags` keeps) barely moves within it: whether it started settled or counting from the first input, the record sees
+/// ([`CREEP_START_UNPINNED_SHARE`](super::constants::CREEP_START_UNPINNED_SHARE): the lags
+/// `catalogue::pinned_lags` leaves out) barely moves within it: whether it started settled
+/// or counting from the first input, the record sees
 /// a constant and a slow trend that the offset and the other lags share, so its part of the
 /// settled creep may or may not be in the offset. The offset is then compared with the span
 /// from the settled creep of the lags the record pins to that of all of them (a power-law
@@ -475,8 +476,7 @@ fn creep_start(
         let creep_v = model.settled_creep_reading_v(u0).ok()?;
         // The settled creep of the lags the record pins (their time constants within
         // CREEP_START_UNPINNED_SHARE of its length).
-        let seconds = d.t_s.last()? - d.t_s.first()?;
-        let pinned = catalogue::pinned_lags(model, seconds);
+        let pinned = catalogue::pinned_lags(model, d.length_s()?);
         // (where the pinned lags leave no creep of the same sign clear of the noise, as a
         // record shorter than three of every lag's time constants, the span would reach zero
         // and take any small offset of the right sign: the one value of all the lags, then)
@@ -1057,10 +1057,15 @@ fn creep_from_first_input(
     {
         return None;
     }
-    let fitted = fit_slow_set(model, data, slow_x, &CREEP_FROM_FIRST, u_range)?;
-    let named: Vec<String> = CREEP_FROM_FIRST.iter().map(|e| e.to_string()).collect();
-    if creep_start(&fitted.0, &named, data, noise).is_some() {
-        return Some(joint_candidate(&CREEP_FROM_FIRST, fitted));
+    // (the set fitted together, offered where its offset is the drift's start)
+    let started = |set: &[&str]| -> Option<Candidate> {
+        let fitted = fit_slow_set(model, data, slow_x, set, u_range)?;
+        let named: Vec<String> = set.iter().map(|e| e.to_string()).collect();
+        creep_start(&fitted.0, &named, data, noise)?;
+        Some(joint_candidate(set, fitted))
+    };
+    if let Some(c) = started(&CREEP_FROM_FIRST) {
+        return Some(c);
     }
     // Beside a scale error the pair's offset holds the scale's work as well and is not the
     // start (families case 3158, a log creep and a 1.1 % scale on random levels: -235 mV
@@ -1069,13 +1074,7 @@ fn creep_from_first_input(
     if catalogue::present(model, "sensor-gain") {
         return None;
     }
-    let fitted = fit_slow_set(model, data, slow_x, &CREEP_SCALE_FROM_FIRST, u_range)?;
-    let named: Vec<String> = CREEP_SCALE_FROM_FIRST
-        .iter()
-        .map(|e| e.to_string())
-        .collect();
-    creep_start(&fitted.0, &named, data, noise)?;
-    Some(joint_candidate(&CREEP_SCALE_FROM_FIRST, fitted))
+    started(&CREEP_SCALE_FROM_FIRST)
 }
 
 /// The drift, the offset its start takes back and a scale error, fitted as one step.
